@@ -1,0 +1,311 @@
+//! Volume input: raw, NRRD, NIfTI readers and procedural volumes.
+//!
+//! Every reader is a [`VolumeSource`]: it reads z-slices on demand, in
+//! increasing z, through a buffered (and, for gzip, decompressing) stream, so a
+//! volume larger than RAM can be imported (DESIGN.md "Data": "It must
+//! stream"). Values are handed on as `f32` data values in the volume-space
+//! layout of DESIGN.md ("Volume space"): x fastest, then y, then z.
+//!
+//! Errors name the file and the field or voxel at fault, because the person
+//! reading them is usually looking at a header in a text editor.
+
+pub mod nifti;
+pub mod nrrd;
+pub mod raw;
+pub mod synth;
+
+use std::path::Path;
+
+use anyhow::{bail, Result};
+use parallax_common::volume::{VolumeInfo, VolumeSource, VoxelType};
+
+pub use self::nrrd::NrrdWriter;
+pub use self::raw::RawSource;
+pub use self::synth::{synth_value, write_synth, SynthKind};
+
+/// How to read a headerless raw volume (`parallax import x.raw --dims …
+/// --type … --spacing …`, DESIGN.md "Command line"): the header a raw file
+/// does not have.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RawParams {
+    /// Voxels along x, y, z (x fastest in the file).
+    pub dims: [usize; 3],
+    /// Sample type of the file.
+    pub voxel_type: VoxelType,
+    /// Voxel spacing in the data's length unit.
+    pub spacing: [f64; 3],
+    /// Bytes to skip at the start of the file (an unknown header).
+    pub byte_offset: u64,
+    /// Byte order of multi-byte samples.
+    pub big_endian: bool,
+}
+
+/// Opens a volume file for streaming, choosing the reader by extension:
+/// `.nrrd` / `.nhdr` (NRRD), `.nii` / `.nii.gz` (NIfTI-1), `.raw`. When `raw`
+/// parameters are given the file is read as raw whatever its name (a name
+/// ending in `.gz` is decompressed on the fly).
+pub fn open(path: &Path, raw: Option<RawParams>) -> Result<Box<dyn VolumeSource + Send>> {
+    if let Some(params) = raw {
+        return Ok(Box::new(raw::open_raw(path, &params)?));
+    }
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
+    if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
+        Ok(Box::new(nrrd::open_nrrd(path)?))
+    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        Ok(Box::new(nifti::open_nifti(path)?))
+    } else if name.ends_with(".raw") || name.ends_with(".raw.gz") {
+        bail!(
+            "{}: a raw volume has no header; give its dims, type and spacing \
+             (--dims X,Y,Z --type u8|u16|i16|f32 --spacing sx,sy,sz)",
+            path.display()
+        )
+    } else {
+        bail!(
+            "{}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz or .raw)",
+            path.display()
+        )
+    }
+}
+
+/// "181×217×181 u8": how messages describe a volume's shape.
+pub(crate) fn shape_text(dims: [usize; 3], voxel_type: VoxelType) -> String {
+    format!("{}×{}×{} {}", dims[0], dims[1], dims[2], voxel_type.name())
+}
+
+/// Checks what every reader must guarantee before handing out a
+/// [`VolumeInfo`]: no zero dimension, and a finite positive spacing (the
+/// volume-space box [0, N·s] of DESIGN.md must be a real box). `dims_field`
+/// and `spacing_field` name where the values came from in the file.
+pub(crate) fn check_info(
+    label: &str,
+    info: &VolumeInfo,
+    dims_field: &str,
+    spacing_field: &str,
+) -> Result<()> {
+    for (axis, &n) in info.dims.iter().enumerate() {
+        if n == 0 {
+            bail!("{label}: {dims_field}: axis {axis} has size 0");
+        }
+    }
+    for (axis, &s) in info.spacing.iter().enumerate() {
+        if s.is_nan() {
+            bail!("{label}: {spacing_field}: spacing of axis {axis} is NaN");
+        }
+        if s <= 0.0 || s.is_infinite() {
+            bail!("{label}: {spacing_field}: spacing of axis {axis} is {s} (must be positive and finite)");
+        }
+    }
+    if info
+        .voxel_count()
+        .checked_mul(info.voxel_type.bytes() as u64)
+        .is_none()
+    {
+        bail!("{label}: {dims_field}: the volume is too large to address");
+    }
+    Ok(())
+}
+
+/// Converts packed samples of `voxel_type` in the given byte order to data
+/// values. `bytes.len()` must be `out.len() · voxel_type.bytes()`.
+pub(crate) fn decode_samples(
+    bytes: &[u8],
+    voxel_type: VoxelType,
+    big_endian: bool,
+    out: &mut [f32],
+) {
+    debug_assert_eq!(bytes.len(), out.len() * voxel_type.bytes());
+    match voxel_type {
+        VoxelType::U8 => {
+            for (o, &b) in out.iter_mut().zip(bytes) {
+                *o = b as f32;
+            }
+        }
+        VoxelType::U16 => {
+            for (o, c) in out.iter_mut().zip(bytes.chunks_exact(2)) {
+                let a = [c[0], c[1]];
+                *o = if big_endian {
+                    u16::from_be_bytes(a)
+                } else {
+                    u16::from_le_bytes(a)
+                } as f32;
+            }
+        }
+        VoxelType::I16 => {
+            for (o, c) in out.iter_mut().zip(bytes.chunks_exact(2)) {
+                let a = [c[0], c[1]];
+                *o = if big_endian {
+                    i16::from_be_bytes(a)
+                } else {
+                    i16::from_le_bytes(a)
+                } as f32;
+            }
+        }
+        VoxelType::F32 => {
+            for (o, c) in out.iter_mut().zip(bytes.chunks_exact(4)) {
+                let a = [c[0], c[1], c[2], c[3]];
+                *o = if big_endian {
+                    f32::from_be_bytes(a)
+                } else {
+                    f32::from_le_bytes(a)
+                };
+            }
+        }
+    }
+}
+
+/// Converts data values to packed samples of `voxel_type` (appended to
+/// `out`), rounding to the nearest integer and clamping to the type's limits
+/// for the integer types. Values must be finite (checked by the caller).
+pub(crate) fn encode_samples(
+    values: &[f32],
+    voxel_type: VoxelType,
+    big_endian: bool,
+    out: &mut Vec<u8>,
+) {
+    out.reserve(values.len() * voxel_type.bytes());
+    let (lo, hi) = voxel_type.limits();
+    let int = |v: f32| (v as f64).round().clamp(lo, hi);
+    match voxel_type {
+        VoxelType::U8 => out.extend(values.iter().map(|&v| int(v) as u8)),
+        VoxelType::U16 => {
+            for &v in values {
+                let x = int(v) as u16;
+                out.extend_from_slice(&if big_endian {
+                    x.to_be_bytes()
+                } else {
+                    x.to_le_bytes()
+                });
+            }
+        }
+        VoxelType::I16 => {
+            for &v in values {
+                let x = int(v) as i16;
+                out.extend_from_slice(&if big_endian {
+                    x.to_be_bytes()
+                } else {
+                    x.to_le_bytes()
+                });
+            }
+        }
+        VoxelType::F32 => {
+            for &v in values {
+                out.extend_from_slice(&if big_endian {
+                    v.to_be_bytes()
+                } else {
+                    v.to_le_bytes()
+                });
+            }
+        }
+    }
+}
+
+/// Rejects NaN and infinities: a non-finite data value would poison every
+/// brick range, average and pre-integrated table downstream, so float input
+/// is checked as it is read (DESIGN.md "Data", `VolumeSource` contract).
+/// `first` is the linear index (x fastest) of `values[0]` in the volume.
+pub(crate) fn check_finite(
+    label: &str,
+    dims: [usize; 3],
+    first: u64,
+    values: &[f32],
+) -> Result<()> {
+    if let Some(pos) = values.iter().position(|v| !v.is_finite()) {
+        let v = values[pos];
+        let idx = first + pos as u64;
+        let nx = dims[0] as u64;
+        let ny = dims[1] as u64;
+        let (i, j, k) = (idx % nx, (idx / nx) % ny, idx / (nx * ny));
+        let what = if v.is_nan() {
+            "NaN"
+        } else if v > 0.0 {
+            "+infinity"
+        } else {
+            "-infinity"
+        };
+        bail!("{label}: voxel ({i},{j},{k}) is {what}");
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    #[test]
+    fn encode_decode_round_trip_and_clamp() {
+        let values = [-3.0f32, -0.4, 0.5, 1.49, 254.6, 300.0, 70000.0, -40000.0];
+        for big in [false, true] {
+            let mut bytes = Vec::new();
+            encode_samples(&values, VoxelType::U8, big, &mut bytes);
+            let mut back = [0f32; 8];
+            decode_samples(&bytes, VoxelType::U8, big, &mut back);
+            assert_eq!(back, [0.0, 0.0, 1.0, 1.0, 255.0, 255.0, 255.0, 0.0]);
+
+            bytes.clear();
+            encode_samples(&values, VoxelType::U16, big, &mut bytes);
+            decode_samples(&bytes, VoxelType::U16, big, &mut back);
+            assert_eq!(back, [0.0, 0.0, 1.0, 1.0, 255.0, 300.0, 65535.0, 0.0]);
+
+            bytes.clear();
+            encode_samples(&values, VoxelType::I16, big, &mut bytes);
+            decode_samples(&bytes, VoxelType::I16, big, &mut back);
+            assert_eq!(
+                back,
+                [-3.0, -0.0, 1.0, 1.0, 255.0, 300.0, 32767.0, -32768.0]
+            );
+
+            bytes.clear();
+            encode_samples(&values, VoxelType::F32, big, &mut bytes);
+            decode_samples(&bytes, VoxelType::F32, big, &mut back);
+            assert_eq!(back, values);
+        }
+    }
+
+    #[test]
+    fn check_finite_names_the_voxel() {
+        let dims = [4, 3, 2];
+        let mut v = vec![0f32; 24];
+        v[4 * 3 + 4 + 2] = f32::NAN; // (2,1,1)
+        let err = check_finite("a.nrrd", dims, 0, &v).unwrap_err().to_string();
+        assert_eq!(err, "a.nrrd: voxel (2,1,1) is NaN");
+        let err = check_finite("a.nrrd", dims, 12, &[0.0, f32::NEG_INFINITY]).unwrap_err();
+        assert_eq!(err.to_string(), "a.nrrd: voxel (1,0,1) is -infinity");
+    }
+
+    #[test]
+    fn open_dispatches_by_extension() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("thing.xyz");
+        std::fs::File::create(&p)
+            .unwrap()
+            .write_all(&[0; 8])
+            .unwrap();
+        let err = open(&p, None).err().unwrap().to_string();
+        assert!(
+            err.contains("thing.xyz") && err.contains("unknown volume format"),
+            "{err}"
+        );
+
+        let r = dir.path().join("thing.raw");
+        std::fs::write(&r, [1u8, 2, 3, 4, 5, 6, 7, 8]).unwrap();
+        let err = open(&r, None).err().unwrap().to_string();
+        assert!(err.contains("thing.raw") && err.contains("--dims"), "{err}");
+
+        // Raw parameters override the extension.
+        let params = RawParams {
+            dims: [2, 2, 2],
+            voxel_type: VoxelType::U8,
+            spacing: [1.0, 1.0, 1.0],
+            byte_offset: 0,
+            big_endian: false,
+        };
+        let mut src = open(&p, Some(params)).unwrap();
+        let mut out = [0f32; 8];
+        src.read_slices(&mut out).unwrap();
+        assert_eq!(out, [0.0; 8]);
+    }
+}

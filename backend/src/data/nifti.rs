@@ -1,0 +1,424 @@
+//! NIfTI-1 input (`.nii`, `.nii.gz`): the format of most MRI and many CT
+//! volumes users have (DESIGN.md "Data").
+//!
+//! The 348-byte header is parsed by the `nifti` crate (which also detects the
+//! byte order); the voxels are streamed by [`RawSource`] from `vox_offset`,
+//! so nothing holds the whole volume. Only the header's size and sample
+//! fields are used: the volume is placed by the scene (DESIGN.md "Volume
+//! space"), not by the qform/sform.
+
+use std::fs::File;
+use std::io::{BufReader, Read};
+use std::path::Path;
+
+use anyhow::{bail, ensure, Context, Result};
+use flate2::bufread::MultiGzDecoder;
+use nifti::{Endianness, NiftiHeader};
+use parallax_common::volume::{VolumeInfo, VoxelType};
+
+use super::check_info;
+use super::raw::{check_file_size, skip_bytes, RawSource, READ_BUFFER};
+
+/// Size of a NIfTI-1 header; data of a single-file (`n+1`) volume starts at
+/// `vox_offset` ≥ 352 (the header plus a 4-byte extension flag).
+const HEADER_BYTES: usize = 348;
+const MIN_VOX_OFFSET: u64 = 352;
+
+/// NIfTI-1 datatype codes and names, for the supported mapping and for
+/// naming the unsupported ones in errors.
+fn datatype(code: i16) -> (Option<VoxelType>, &'static str) {
+    match code {
+        2 => (Some(VoxelType::U8), "uint8"),
+        4 => (Some(VoxelType::I16), "int16"),
+        16 => (Some(VoxelType::F32), "float32"),
+        512 => (Some(VoxelType::U16), "uint16"),
+        1 => (None, "binary"),
+        8 => (None, "int32"),
+        32 => (None, "complex64"),
+        64 => (None, "float64"),
+        128 => (None, "rgb24"),
+        256 => (None, "int8"),
+        768 => (None, "uint32"),
+        1024 => (None, "int64"),
+        1280 => (None, "uint64"),
+        1536 => (None, "float128"),
+        1792 => (None, "complex128"),
+        2048 => (None, "complex256"),
+        2304 => (None, "rgba32"),
+        _ => (None, "unknown"),
+    }
+}
+
+/// The voxel type reported for scaled data (`slope · stored + inter`).
+///
+/// With an integer slope and intercept every value is still an integer; the
+/// first of u8, u16, i16 whose limits hold the scaled limits of the stored
+/// type is reported (u8 with slope 1, inter −1024 → i16; u8 with inter 1000
+/// → u16), so integer data keeps an exact integer type. When none does (i16
+/// with inter −1024 can reach −33792), or the slope or intercept is
+/// fractional, the values are reported as F32. The decision uses the stored
+/// type's limits, not the data, because it is made before any voxel is read.
+fn scaled_type(stored: VoxelType, slope: f64, inter: f64) -> VoxelType {
+    let integer = |x: f64| x.fract() == 0.0 && x.abs() < 1e9;
+    if stored == VoxelType::F32 || !integer(slope) || !integer(inter) {
+        return VoxelType::F32;
+    }
+    let (lo, hi) = stored.limits();
+    let (a, b) = (slope * lo + inter, slope * hi + inter);
+    let (lo, hi) = (a.min(b), a.max(b));
+    [VoxelType::U8, VoxelType::U16, VoxelType::I16]
+        .into_iter()
+        .find(|t| {
+            let (tl, th) = t.limits();
+            tl <= lo && hi <= th
+        })
+        .unwrap_or(VoxelType::F32)
+}
+
+/// Opens a NIfTI-1 single-file volume (`.nii`, or gzip-compressed `.nii.gz`).
+///
+/// * Dimensions: `dim[0]` must be 3, or more with every extra axis of size 1.
+/// * Datatypes: uint8 (2), int16 (4), float32 (16), uint16 (512).
+/// * Spacing: |pixdim[1..4]|; a pixdim of 0 (written by some tools for
+///   "unknown") is read as 1, without a warning: the scene's `size` places
+///   the volume anyway (DESIGN.md "Volume space"). A non-finite pixdim is an
+///   error.
+/// * Scaling: if `scl_slope` ≠ 0 and (slope, inter) ≠ (1, 0), values are
+///   `slope · stored + inter`; see [`scaled_type`] for the reported type.
+pub fn open_nifti(path: &Path) -> Result<RawSource> {
+    let label = path.display().to_string();
+    let file = File::open(path).with_context(|| format!("{label}: cannot open"))?;
+    let gz = path.to_string_lossy().to_lowercase().ends_with(".gz");
+    let file_len = file
+        .metadata()
+        .with_context(|| format!("{label}: cannot stat"))?
+        .len();
+    let buffered = BufReader::with_capacity(READ_BUFFER, file);
+    let mut reader: Box<dyn Read + Send> = if gz {
+        Box::new(MultiGzDecoder::new(buffered))
+    } else {
+        Box::new(buffered)
+    };
+
+    let mut raw_header = [0u8; HEADER_BYTES];
+    reader
+        .read_exact(&mut raw_header)
+        .with_context(|| format!("{label}: cannot read the {HEADER_BYTES}-byte NIfTI header"))?;
+    let sizeof_le =
+        i32::from_le_bytes([raw_header[0], raw_header[1], raw_header[2], raw_header[3]]);
+    let sizeof_be =
+        i32::from_be_bytes([raw_header[0], raw_header[1], raw_header[2], raw_header[3]]);
+    if sizeof_le == 540 || sizeof_be == 540 {
+        bail!(
+            "{label}: sizeof_hdr: 540 is a NIfTI-2 header, which is not supported (NIfTI-1 only)"
+        );
+    }
+    ensure!(
+        sizeof_le == 348 || sizeof_be == 348,
+        "{label}: sizeof_hdr: {sizeof_le} is not 348 (not a NIfTI-1 file)"
+    );
+    let h = NiftiHeader::from_reader(&raw_header[..])
+        .map_err(|e| anyhow::anyhow!("{label}: not a valid NIfTI-1 header ({e})"))?;
+    ensure!(
+        &h.magic == b"n+1\0",
+        "{label}: magic: '{}' is a header/image pair (.hdr + .img), which is not supported (need a single .nii file)",
+        String::from_utf8_lossy(&h.magic[..3])
+    );
+
+    let ndim = h.dim[0] as usize;
+    ensure!(
+        (3..=7).contains(&ndim) && h.dim[4..=ndim].iter().all(|&d| d == 1),
+        "{label}: dim: dim[0] = {} with sizes {:?} is not a 3-D volume",
+        h.dim[0],
+        &h.dim[1..=ndim.clamp(1, 7)]
+    );
+    let dims = [h.dim[1] as usize, h.dim[2] as usize, h.dim[3] as usize];
+
+    let (stored, type_name) = datatype(h.datatype);
+    let Some(stored) = stored else {
+        bail!(
+            "{label}: datatype {} ({type_name}) is not supported (use uint8, int16, uint16 or float32)",
+            h.datatype
+        );
+    };
+
+    let mut spacing = [1.0f64; 3];
+    for (a, s) in spacing.iter_mut().enumerate() {
+        let p = h.pixdim[a + 1] as f64;
+        ensure!(p.is_finite(), "{label}: pixdim[{}] is {p}", a + 1);
+        *s = if p == 0.0 { 1.0 } else { p.abs() };
+    }
+
+    let info = VolumeInfo {
+        dims,
+        spacing,
+        voxel_type: stored,
+    };
+    check_info(&label, &info, "dim", "pixdim")?;
+
+    let vox_offset = h.vox_offset as f64;
+    ensure!(
+        vox_offset.is_finite() && vox_offset >= 0.0,
+        "{label}: vox_offset: {vox_offset} is not a byte offset"
+    );
+    // Some writers leave vox_offset at 0; the data then follows the header
+    // and its 4-byte extension flag.
+    let vox_offset = (vox_offset as u64).max(MIN_VOX_OFFSET);
+    if !gz {
+        check_file_size(&label, &info, vox_offset, file_len, false)?;
+    }
+    skip_bytes(&mut reader, vox_offset - HEADER_BYTES as u64).with_context(|| {
+        format!("{label}: vox_offset: cannot reach the data at byte {vox_offset}")
+    })?;
+
+    let big_endian = h.endianness == Endianness::Big;
+    let mut src = RawSource::from_reader(label, info, big_endian, gz, reader);
+    let (slope, inter) = (h.scl_slope as f64, h.scl_inter as f64);
+    if slope.is_finite() && inter.is_finite() && slope != 0.0 && !(slope == 1.0 && inter == 0.0) {
+        src = src.with_scale(slope, inter, scaled_type(stored, slope, inter));
+    }
+    Ok(src)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use parallax_common::volume::{Volume, VolumeSource};
+    use std::io::Write;
+
+    /// A minimal NIfTI-1 header (native little endian, or big endian).
+    fn header(
+        dims: [u16; 3],
+        datatype: i16,
+        bitpix: i16,
+        pixdim: [f32; 3],
+        slope: f32,
+        inter: f32,
+        big: bool,
+    ) -> Vec<u8> {
+        let mut h = vec![0u8; 352];
+        let put = |h: &mut Vec<u8>, at: usize, b: &[u8]| h[at..at + b.len()].copy_from_slice(b);
+        macro_rules! w {
+            ($at:expr, $v:expr) => {
+                put(
+                    &mut h,
+                    $at,
+                    &if big {
+                        $v.to_be_bytes()
+                    } else {
+                        $v.to_le_bytes()
+                    },
+                )
+            };
+        }
+        w!(0, 348i32);
+        let dim: [u16; 8] = [3, dims[0], dims[1], dims[2], 1, 1, 1, 1];
+        for (i, d) in dim.iter().enumerate() {
+            w!(40 + 2 * i, *d);
+        }
+        w!(70, datatype);
+        w!(72, bitpix);
+        let pd = [1.0f32, pixdim[0], pixdim[1], pixdim[2], 0.0, 0.0, 0.0, 0.0];
+        for (i, p) in pd.iter().enumerate() {
+            w!(76 + 4 * i, *p);
+        }
+        w!(108, 352.0f32);
+        w!(112, slope);
+        w!(116, inter);
+        put(&mut h, 344, b"n+1\0");
+        h
+    }
+
+    fn write(path: &Path, bytes: &[u8]) {
+        if path.to_string_lossy().ends_with(".gz") {
+            let mut enc = flate2::write::GzEncoder::new(
+                File::create(path).unwrap(),
+                flate2::Compression::fast(),
+            );
+            enc.write_all(bytes).unwrap();
+            enc.finish().unwrap();
+        } else {
+            std::fs::write(path, bytes).unwrap();
+        }
+    }
+
+    #[test]
+    fn reads_int16_big_endian_and_gzip() {
+        let dir = tempfile::tempdir().unwrap();
+        let vals: Vec<i16> = vec![-1000, 0, 7, 32767, -32768, 12, 13, 14];
+        for (name, big) in [("a.nii", false), ("b.nii", true), ("c.nii.gz", false)] {
+            let mut bytes = header([2, 2, 2], 4, 16, [0.5, -0.75, 0.0], 0.0, 0.0, big);
+            for v in &vals {
+                bytes.extend_from_slice(&if big {
+                    v.to_be_bytes()
+                } else {
+                    v.to_le_bytes()
+                });
+            }
+            let p = dir.path().join(name);
+            write(&p, &bytes);
+            let mut src = super::super::open(&p, None).unwrap();
+            // pixdim −0.75 → 0.75 (absolute), 0 → 1.
+            assert_eq!(src.info().spacing, [0.5, 0.75, 1.0]);
+            assert_eq!(src.info().voxel_type, VoxelType::I16);
+            let v = Volume::read_all(&mut *src).unwrap();
+            let want: Vec<f32> = vals.iter().map(|&x| x as f32).collect();
+            assert_eq!(v.data, want, "{name}");
+        }
+    }
+
+    #[test]
+    fn scaling_changes_values_and_type() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.nii");
+        let mut bytes = header([2, 1, 1], 2, 8, [1.0; 3], 2.0, -1024.0, false);
+        bytes.extend_from_slice(&[0, 255]);
+        write(&p, &bytes);
+        let mut src = open_nifti(&p).unwrap();
+        assert_eq!(src.info().voxel_type, VoxelType::I16);
+        let mut out = [0f32; 2];
+        src.read_slices(&mut out).unwrap();
+        assert_eq!(out, [-1024.0, -514.0]);
+
+        let mut bytes = header([2, 1, 1], 2, 8, [1.0; 3], 0.5, 0.25, false);
+        bytes.extend_from_slice(&[3, 255]);
+        write(&p, &bytes);
+        let mut src = open_nifti(&p).unwrap();
+        assert_eq!(src.info().voxel_type, VoxelType::F32);
+        src.read_slices(&mut out).unwrap();
+        assert_eq!(out, [1.75, 127.75]);
+
+        // (1, 0) and slope 0 mean "no scaling".
+        for (slope, inter) in [(1.0, 0.0), (0.0, 5.0)] {
+            let mut bytes = header([2, 1, 1], 2, 8, [1.0; 3], slope, inter, false);
+            bytes.extend_from_slice(&[3, 255]);
+            write(&p, &bytes);
+            let mut src = open_nifti(&p).unwrap();
+            assert_eq!(src.info().voxel_type, VoxelType::U8);
+            src.read_slices(&mut out).unwrap();
+            assert_eq!(out, [3.0, 255.0]);
+        }
+        assert_eq!(scaled_type(VoxelType::I16, 1.0, -1024.0), VoxelType::F32);
+        assert_eq!(scaled_type(VoxelType::U8, 1.0, 1000.0), VoxelType::U16);
+        assert_eq!(scaled_type(VoxelType::U16, 1.0, 0.0), VoxelType::U16);
+    }
+
+    #[test]
+    fn bad_inputs_name_file_and_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("bad.nii");
+        let case = |bytes: Vec<u8>| {
+            write(&p, &bytes);
+            open_nifti(&p).err().expect("must fail").to_string()
+        };
+        let err = case(header([2, 2, 2], 64, 64, [1.0; 3], 0.0, 0.0, false));
+        assert!(
+            err.contains("bad.nii") && err.contains("datatype 64 (float64)"),
+            "{err}"
+        );
+
+        let mut h = header([2, 2, 2], 2, 8, [1.0; 3], 0.0, 0.0, false);
+        h[40..42].copy_from_slice(&2u16.to_le_bytes());
+        let err = case(h);
+        assert!(
+            err.contains("bad.nii") && err.contains("dim[0] = 2"),
+            "{err}"
+        );
+
+        let mut h = header([2, 0, 2], 2, 8, [1.0; 3], 0.0, 0.0, false);
+        h.extend_from_slice(&[0; 8]);
+        let err = case(h);
+        assert!(
+            err.contains("bad.nii") && err.contains("dim: axis 1 has size 0"),
+            "{err}"
+        );
+
+        let mut h = header([2, 2, 2], 2, 8, [1.0, f32::NAN, 1.0], 0.0, 0.0, false);
+        h.extend_from_slice(&[0; 8]);
+        let err = case(h);
+        assert!(
+            err.contains("bad.nii") && err.contains("pixdim[2] is NaN"),
+            "{err}"
+        );
+
+        let mut h = header([2, 2, 2], 2, 8, [1.0; 3], 0.0, 0.0, false);
+        h.extend_from_slice(&[0; 5]);
+        let err = case(h);
+        assert!(
+            err.contains("bad.nii")
+                && err.contains("expected at least 360 bytes")
+                && err.contains("has 357"),
+            "{err}"
+        );
+
+        let mut h = header([2, 2, 2], 2, 8, [1.0; 3], 0.0, 0.0, false);
+        h[344..348].copy_from_slice(b"ni1\0");
+        let err = case(h);
+        assert!(err.contains("bad.nii") && err.contains("magic"), "{err}");
+
+        let err = case(vec![7u8; 400]);
+        assert!(
+            err.contains("bad.nii") && err.contains("sizeof_hdr"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn nan_and_truncated_gzip() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("f.nii.gz");
+        let mut bytes = header([2, 2, 2], 16, 32, [1.0; 3], 0.0, 0.0, false);
+        for x in 0..8 {
+            let v = if x == 5 { f32::INFINITY } else { x as f32 };
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        write(&p, &bytes);
+        let mut src = open_nifti(&p).unwrap();
+        let err = Volume::read_all(&mut src).unwrap_err().to_string();
+        assert_eq!(err, format!("{}: voxel (1,0,1) is +infinity", p.display()));
+
+        let mut bytes = header([64, 64, 4], 2, 8, [1.0; 3], 0.0, 0.0, false);
+        bytes.extend((0..64 * 64 * 4u32).map(|x| (x.wrapping_mul(2654435761) >> 24) as u8));
+        write(&p, &bytes);
+        let gz = std::fs::read(&p).unwrap();
+        std::fs::write(&p, &gz[..gz.len() * 3 / 4]).unwrap();
+        let mut src = open_nifti(&p).unwrap();
+        let err = Volume::read_all(&mut src).unwrap_err().to_string();
+        assert!(err.contains("f.nii.gz") && err.contains("slice"), "{err}");
+    }
+
+    /// Colin27 (ch2), the MRI template shipped with MRIcron: 181×217×181 u8,
+    /// 1 mm voxels, gzip-compressed.
+    #[test]
+    fn colin27_opens() {
+        let path = Path::new("/usr/share/mricron/templates/ch2.nii.gz");
+        if !path.exists() {
+            println!("skipping colin27_opens: {} is missing", path.display());
+            return;
+        }
+        let mut src = super::super::open(path, None).unwrap();
+        let info = src.info().clone();
+        assert_eq!(info.dims, [181, 217, 181]);
+        assert_eq!(info.spacing, [1.0, 1.0, 1.0]);
+        assert_eq!(info.voxel_type, VoxelType::U8);
+        let mut buf = vec![0f32; info.slice_len() * 20];
+        let (mut lo, mut hi, mut sum) = (f32::INFINITY, f32::NEG_INFINITY, 0f64);
+        let mut k = 0;
+        while k < info.dims[2] {
+            let n = 20.min(info.dims[2] - k);
+            let chunk = &mut buf[..n * info.slice_len()];
+            src.read_slices(chunk).unwrap();
+            for &v in chunk.iter() {
+                lo = lo.min(v);
+                hi = hi.max(v);
+                sum += v as f64;
+            }
+            k += n;
+        }
+        let mean = sum / info.voxel_count() as f64;
+        assert_eq!(lo, 0.0);
+        assert!(hi > 100.0 && hi <= 255.0, "max {hi}");
+        assert!(mean > 5.0 && mean < 150.0, "mean {mean}");
+        assert!(src.read_slices(&mut buf[..info.slice_len()]).is_err());
+    }
+}

@@ -1,0 +1,7 @@
+//! Parallax back end. The pipeline reads top to bottom:
+//! data (volume input) → store (octree import and reading) → reference
+//! (the exact integral every image is measured against).
+
+pub mod data;
+pub mod reference;
+pub mod store;

@@ -1,0 +1,451 @@
+//! Streaming import of a volume into the octree database (G10 §5 "Data
+//! preprocessing", G08 §3, L12 §4.1).
+//!
+//! The volume is read front to back one z-slice at a time. Each octree level
+//! keeps a rolling window of B + 2·OVERLAP slices of its own voxel grid; as
+//! soon as the window holds every slice a row of bricks needs (overlap
+//! included), the row is cut into bricks, encoded in parallel and written.
+//! Every pair of slices a level receives is averaged 2×2×2 into one slice of
+//! the next coarser level, so all levels advance together and memory is
+//! bounded by the windows: Σ_l (B+5)·nx_l·ny_l values, whatever the depth of
+//! the volume. Nothing else of the volume is held.
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use parallax_common::octree::codec::{self, BrickEncoding};
+use parallax_common::octree::writer::NodeStats;
+use parallax_common::octree::{Header, NodeKey, OctreeLayout, OctreeWriter, Summary, OVERLAP};
+use parallax_common::volume::VolumeSource;
+use rayon::prelude::*;
+use std::collections::VecDeque;
+use std::path::Path;
+use std::time::Instant;
+
+#[derive(Clone, Debug)]
+pub struct ImportOptions {
+    /// Brick side B (voxels, overlap excluded).
+    pub brick: usize,
+    pub encoding: BrickEncoding,
+    /// Drop bricks whose values (overlap included) are all below this.
+    pub empty_below: Option<f32>,
+    /// Memory the import may use for its slice windows and brick buffers.
+    pub memory_mb: usize,
+    /// Show a progress bar (only drawn when stderr is a terminal).
+    pub progress: bool,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        ImportOptions {
+            brick: 32,
+            encoding: BrickEncoding::U8Range,
+            empty_below: None,
+            memory_mb: 2048,
+            progress: false,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct ImportReport {
+    pub nodes: usize,
+    pub stored: usize,
+    pub empty: usize,
+    pub file_bytes: u64,
+    pub source_bytes: u64,
+    pub seconds: f64,
+    pub summary: Summary,
+}
+
+/// Bricks encoded together in one parallel batch (bounds the memory of
+/// encoded-but-unwritten bricks).
+const BATCH: usize = 64;
+
+/// Imports `src` into the database `out` (written under a temporary name and
+/// renamed when complete).
+pub fn import(
+    src: &mut dyn VolumeSource,
+    out: &Path,
+    source_name: &str,
+    opts: &ImportOptions,
+) -> Result<ImportReport> {
+    let start = Instant::now();
+    let info = src.info().clone();
+    if !(4..=256).contains(&opts.brick) {
+        bail!(
+            "--brick {}: the brick size must be between 4 and 256",
+            opts.brick
+        );
+    }
+    if let Some(t) = opts.empty_below {
+        if !t.is_finite() {
+            bail!("--empty-below {t}: must be a finite value");
+        }
+    }
+    let layout = OctreeLayout::new(info.dims, opts.brick);
+    let need = memory_needed(&layout);
+    if need > opts.memory_mb as u64 * (1 << 20) {
+        bail!(
+            "--memory-mb {}: importing {}×{}×{} with {}³ bricks needs at least {} MiB \
+             (slice windows of every level); raise --memory-mb",
+            opts.memory_mb,
+            info.dims[0],
+            info.dims[1],
+            info.dims[2],
+            opts.brick,
+            need.div_ceil(1 << 20)
+        );
+    }
+    let header = Header {
+        info: info.clone(),
+        layout,
+        encoding: opts.encoding,
+        empty_below: opts.empty_below,
+        source: source_name.to_string(),
+    };
+    let mut writer = OctreeWriter::create(out, &header)?;
+    let mut levels: Vec<Level> = (0..layout.levels).map(|l| Level::new(&layout, l)).collect();
+    let mut sink = Sink {
+        writer: &mut writer,
+        layout,
+        opts,
+        stored: 0,
+        empty: 0,
+        quant_sq: 0.0,
+        quant_max: 0.0,
+        quant_n: 0,
+    };
+
+    let bar = if opts.progress {
+        ProgressBar::with_draw_target(Some(info.dims[2] as u64), ProgressDrawTarget::stderr())
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("importing {bar:40} {pos}/{len} slices ({eta} left)")
+            .unwrap(),
+    );
+
+    let (mut vmin, mut vmax) = (f32::INFINITY, f32::NEG_INFINITY);
+    let leaf = layout.leaf_level() as usize;
+    for z in 0..info.dims[2] {
+        let mut slice = vec![0f32; info.slice_len()];
+        src.read_slices(&mut slice)
+            .with_context(|| format!("{source_name}: reading slice {z}"))?;
+        for &v in &slice {
+            vmin = vmin.min(v);
+            vmax = vmax.max(v);
+        }
+        push_slice(&mut levels, leaf, slice, &mut sink)?;
+        bar.inc(1);
+    }
+    // Flush from the finest level up: each level's last odd slice feeds its
+    // parent before the parent emits its final rows.
+    for l in (0..=leaf).rev() {
+        while levels[l].next_row < levels[l].bricks[2] {
+            emit_row(&mut levels[l], &mut sink)?;
+        }
+        if let Some(half) = levels[l].pending.take() {
+            if l > 0 {
+                push_slice(&mut levels, l - 1, half, &mut sink)?;
+            }
+        }
+    }
+    bar.finish_and_clear();
+
+    let summary = Summary {
+        value_min: vmin,
+        value_max: vmax,
+        quant_rms: if sink.quant_n > 0 {
+            (sink.quant_sq / sink.quant_n as f64).sqrt()
+        } else {
+            0.0
+        },
+        quant_max: sink.quant_max,
+        quant_samples: sink.quant_n,
+    };
+    let (stored, empty) = (sink.stored, sink.empty);
+    let file_bytes = writer.finish(summary.clone())?;
+    Ok(ImportReport {
+        nodes: stored + empty,
+        stored,
+        empty,
+        file_bytes,
+        source_bytes: info.source_bytes(),
+        seconds: start.elapsed().as_secs_f64(),
+        summary,
+    })
+}
+
+/// Bytes the slice windows and brick batches take at most.
+pub fn memory_needed(layout: &OctreeLayout) -> u64 {
+    let window = (layout.brick + 2 * OVERLAP + 1) as u64;
+    let slices: u64 = (0..layout.levels)
+        .map(|l| {
+            let d = layout.level_dims(l);
+            // window of full slices + one pending half-resolution slice
+            (window * (d[0] * d[1]) as u64 + (d[0] * d[1]) as u64 / 4) * 4
+        })
+        .sum();
+    let batch = BATCH as u64 * layout.stored_len() as u64 * 4 * 2;
+    slices + batch
+}
+
+/// One level's rolling window of slices.
+struct Level {
+    level: u32,
+    dims: [usize; 3],
+    bricks: [usize; 3],
+    brick: usize,
+    /// Consecutive slices; `slices[0]` has index `first`.
+    slices: VecDeque<Vec<f32>>,
+    first: usize,
+    received: usize,
+    next_row: usize,
+    /// The 2×2 average of an unpaired slice, waiting for its z partner.
+    pending: Option<Vec<f32>>,
+}
+
+impl Level {
+    fn new(layout: &OctreeLayout, level: u32) -> Self {
+        Level {
+            level,
+            dims: layout.level_dims(level),
+            bricks: layout.level_bricks(level),
+            brick: layout.brick,
+            slices: VecDeque::new(),
+            first: 0,
+            received: 0,
+            next_row: 0,
+            pending: None,
+        }
+    }
+
+    /// The last slice index row `r` needs (its top overlap, clamped).
+    fn last_needed(&self, r: usize) -> usize {
+        ((r + 1) * self.brick + OVERLAP - 1).min(self.dims[2] - 1)
+    }
+
+    fn slice(&self, z: i64) -> &[f32] {
+        let z = z.clamp(0, self.dims[2] as i64 - 1) as usize;
+        &self.slices[z - self.first]
+    }
+
+    /// Gathers a brick's (B+4)³ values, clamping indices to the grid (the
+    /// field is clamped to the edge voxels, DESIGN.md).
+    fn gather(&self, bx: usize, by: usize, r: usize, side: usize) -> Vec<f32> {
+        let [nx, ny, _] = self.dims;
+        let b = self.brick as i64;
+        let o = OVERLAP as i64;
+        let (x0, y0, z0) = (bx as i64 * b - o, by as i64 * b - o, r as i64 * b - o);
+        let mut out = Vec::with_capacity(side * side * side);
+        let inside_x = x0 >= 0 && x0 as usize + side <= nx;
+        for zz in 0..side as i64 {
+            let s = self.slice(z0 + zz);
+            for yy in 0..side as i64 {
+                let y = (y0 + yy).clamp(0, ny as i64 - 1) as usize;
+                let row = &s[y * nx..(y + 1) * nx];
+                if inside_x {
+                    out.extend_from_slice(&row[x0 as usize..x0 as usize + side]);
+                } else {
+                    out.extend(
+                        (0..side as i64).map(|xx| row[(x0 + xx).clamp(0, nx as i64 - 1) as usize]),
+                    );
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Where finished bricks go, with the running figures of the import.
+struct Sink<'a> {
+    writer: &'a mut OctreeWriter,
+    layout: OctreeLayout,
+    opts: &'a ImportOptions,
+    stored: usize,
+    empty: usize,
+    quant_sq: f64,
+    quant_max: f64,
+    quant_n: u64,
+}
+
+fn push_slice(levels: &mut [Level], l: usize, slice: Vec<f32>, sink: &mut Sink) -> Result<()> {
+    let parent_slice = {
+        let lv = &mut levels[l];
+        let half = (l > 0).then(|| halve_xy(&slice, lv.dims[0], lv.dims[1]));
+        lv.slices.push_back(slice);
+        lv.received += 1;
+        while lv.next_row < lv.bricks[2] && lv.received > lv.last_needed(lv.next_row) {
+            emit_row(lv, sink)?;
+        }
+        match (half, lv.pending.take()) {
+            (Some(h), Some(p)) => Some(p.iter().zip(&h).map(|(a, b)| 0.5 * (a + b)).collect()),
+            (Some(h), None) => {
+                lv.pending = Some(h);
+                None
+            }
+            (None, _) => None,
+        }
+    };
+    if let Some(ps) = parent_slice {
+        push_slice(levels, l - 1, ps, sink)?;
+    }
+    Ok(())
+}
+
+/// 2×2 average of a slice in x and y; at an odd edge the average is over the
+/// voxels that exist.
+fn halve_xy(s: &[f32], nx: usize, ny: usize) -> Vec<f32> {
+    let (hx, hy) = (nx.div_ceil(2), ny.div_ceil(2));
+    let mut out = Vec::with_capacity(hx * hy);
+    for j in 0..hy {
+        let (y0, y1) = (2 * j, (2 * j + 1).min(ny - 1));
+        for i in 0..hx {
+            let (x0, x1) = (2 * i, (2 * i + 1).min(nx - 1));
+            let mut sum = s[y0 * nx + x0];
+            let mut n = 1.0;
+            if x1 != x0 {
+                sum += s[y0 * nx + x1];
+                n += 1.0;
+            }
+            if y1 != y0 {
+                sum += s[y1 * nx + x0];
+                n += 1.0;
+                if x1 != x0 {
+                    sum += s[y1 * nx + x1];
+                    n += 1.0;
+                }
+            }
+            out.push(sum / n);
+        }
+    }
+    out
+}
+
+struct Encoded {
+    key: NodeKey,
+    stats: NodeStats,
+    bytes: Option<Vec<u8>>,
+    quant_sq: f64,
+    quant_max: f64,
+    quant_n: u64,
+}
+
+/// Cuts row `lv.next_row` into bricks, encodes and writes them, and drops the
+/// slices no later row needs.
+fn emit_row(lv: &mut Level, sink: &mut Sink) -> Result<()> {
+    let r = lv.next_row;
+    let side = sink.layout.stored_side();
+    let leaf = lv.level == sink.layout.leaf_level();
+    let columns: Vec<(usize, usize)> = (0..lv.bricks[1])
+        .flat_map(|by| (0..lv.bricks[0]).map(move |bx| (bx, by)))
+        .collect();
+    for batch in columns.chunks(BATCH) {
+        let lvr = &*lv;
+        let opts = sink.opts;
+        let encoded: Vec<Encoded> = batch
+            .par_iter()
+            .map(|&(bx, by)| encode_brick(lvr, bx, by, r, side, leaf, opts))
+            .collect();
+        for e in encoded {
+            match &e.bytes {
+                Some(b) => {
+                    sink.stored += 1;
+                    sink.writer.add(e.key, e.stats, Some(b))?;
+                }
+                None => {
+                    sink.empty += 1;
+                    sink.writer.add(e.key, e.stats, None)?;
+                }
+            }
+            sink.quant_sq += e.quant_sq;
+            sink.quant_max = sink.quant_max.max(e.quant_max);
+            sink.quant_n += e.quant_n;
+        }
+    }
+    lv.next_row += 1;
+    let keep_from = (lv.next_row * lv.brick).saturating_sub(OVERLAP);
+    while lv.first < keep_from && lv.slices.len() > 1 {
+        lv.slices.pop_front();
+        lv.first += 1;
+    }
+    Ok(())
+}
+
+fn encode_brick(
+    lv: &Level,
+    bx: usize,
+    by: usize,
+    r: usize,
+    side: usize,
+    leaf: bool,
+    opts: &ImportOptions,
+) -> Encoded {
+    let key = NodeKey::new(lv.level as u8, bx as u32, by as u32, r as u32);
+    let values = lv.gather(bx, by, r, side);
+    let (min, max) = codec::value_range(&values);
+    // Mean and variance over the node's own voxels inside the volume.
+    let b = lv.brick;
+    let own = |n: usize, o: usize| OVERLAP..OVERLAP + b.min(n - o * b);
+    let (rx, ry, rz) = (own(lv.dims[0], bx), own(lv.dims[1], by), own(lv.dims[2], r));
+    let (mut sum, mut sq, mut n) = (0f64, 0f64, 0u64);
+    for z in rz.clone() {
+        for y in ry.clone() {
+            for &v in &values[(z * side + y) * side + rx.start..(z * side + y) * side + rx.end] {
+                sum += v as f64;
+                sq += v as f64 * v as f64;
+                n += 1;
+            }
+        }
+    }
+    let mean = sum / n as f64;
+    let variance = (sq / n as f64 - mean * mean).max(0.0);
+    let stats = NodeStats {
+        min,
+        max,
+        mean: mean as f32,
+        variance: variance as f32,
+    };
+    let empty = opts.empty_below.is_some_and(|t| max < t);
+    let mut e = Encoded {
+        key,
+        stats,
+        bytes: None,
+        quant_sq: 0.0,
+        quant_max: 0.0,
+        quant_n: 0,
+    };
+    if empty {
+        return e;
+    }
+    let bytes = codec::encode(&values, min, max, opts.encoding);
+    if leaf && opts.encoding != BrickEncoding::F32 {
+        // Measure the quantisation error on the source voxels this brick owns,
+        // through the same decoder the renderer uses.
+        let decoded = codec::decode(
+            &bytes,
+            codec::checksum(&bytes),
+            min,
+            max,
+            opts.encoding,
+            values.len(),
+        )
+        .expect("a brick just encoded decodes");
+        for z in rz {
+            for y in ry.clone() {
+                for x in rx.clone() {
+                    let i = (z * side + y) * side + x;
+                    let d = (values[i] as f64 - decoded[i] as f64).abs();
+                    e.quant_sq += d * d;
+                    e.quant_max = e.quant_max.max(d);
+                    e.quant_n += 1;
+                }
+            }
+        }
+    } else if leaf {
+        e.quant_n = n;
+    }
+    e.bytes = Some(bytes);
+    e
+}

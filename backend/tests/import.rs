@@ -1,0 +1,316 @@
+//! Import → .pxo → read back: every brick against the source, overlaps against
+//! neighbours, inner nodes against their children, corruption detection.
+
+use parallax_backend::store::{self, info, ImportOptions};
+use parallax_common::octree::{BrickEncoding, NodeKey, OctreeDb, OVERLAP};
+use parallax_common::volume::{MemorySource, Volume, VoxelType};
+use std::path::Path;
+
+/// A signed, anisotropic test volume with structure at every scale and a
+/// region of low values (for empty-brick tests).
+fn test_volume(dims: [usize; 3]) -> Volume {
+    Volume::from_fn(dims, [0.5, 0.7, 1.3], VoxelType::I16, |i, j, k| {
+        if i < dims[0] / 3 {
+            -1000.0
+        } else {
+            ((i * 37 + j * 11 + k * 5) % 97) as f32 * 13.0 - 300.0 + (i as f32 * 0.37).sin() * 200.0
+        }
+        .round()
+    })
+}
+
+fn import(vol: &Volume, out: &Path, opts: &ImportOptions) -> store::ImportReport {
+    store::import(&mut MemorySource::new(vol), out, "test volume", opts).unwrap()
+}
+
+/// Reassembles a level's full voxel grid from its decoded bricks (interior
+/// voxels only), checking on the way that every overlap voxel equals the
+/// owning neighbour's voxel (or the clamped edge voxel).
+fn level_grid(db: &OctreeDb, level: u32) -> Vec<f32> {
+    let l = db.layout();
+    let d = l.level_dims(level);
+    let nb = l.level_bricks(level);
+    let b = l.brick;
+    let side = l.stored_side();
+    let mut grid = vec![f32::NAN; d[0] * d[1] * d[2]];
+    let mut bricks = Vec::new();
+    for z in 0..nb[2] {
+        for y in 0..nb[1] {
+            for x in 0..nb[0] {
+                let key = NodeKey::new(level as u8, x as u32, y as u32, z as u32);
+                let v = db.read_brick(key).unwrap().expect("stored");
+                for k in 0..b.min(d[2] - z * b) {
+                    for j in 0..b.min(d[1] - y * b) {
+                        for i in 0..b.min(d[0] - x * b) {
+                            let s = v[((k + OVERLAP) * side + j + OVERLAP) * side + i + OVERLAP];
+                            grid[((z * b + k) * d[1] + y * b + j) * d[0] + x * b + i] = s;
+                        }
+                    }
+                }
+                bricks.push((key, v));
+            }
+        }
+    }
+    assert!(grid.iter().all(|v| !v.is_nan()), "level {level} fully covered");
+    for (key, v) in bricks {
+        let o = l.brick_origin(key);
+        for k in 0..side {
+            for j in 0..side {
+                for i in 0..side {
+                    let c = |p: i64, n: usize| p.clamp(0, n as i64 - 1) as usize;
+                    let (gx, gy, gz) = (
+                        c(o[0] + i as i64, d[0]),
+                        c(o[1] + j as i64, d[1]),
+                        c(o[2] + k as i64, d[2]),
+                    );
+                    assert_eq!(
+                        v[(k * side + j) * side + i],
+                        grid[(gz * d[1] + gy) * d[0] + gx],
+                        "brick {key} voxel ({i},{j},{k}) vs its neighbour"
+                    );
+                }
+            }
+        }
+    }
+    grid
+}
+
+#[test]
+fn full_precision_round_trip_overlaps_and_averages() {
+    let dims = [70, 45, 37];
+    let vol = test_volume(dims);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("t.pxo");
+    let opts = ImportOptions {
+        brick: 8,
+        encoding: BrickEncoding::F32,
+        ..Default::default()
+    };
+    let r = import(&vol, &out, &opts);
+    let db = OctreeDb::open(&out).unwrap();
+    let l = *db.layout();
+    assert_eq!(l.levels, 5); // 8·2^4 = 128 ≥ 70
+    assert_eq!(r.nodes, l.node_count());
+    assert_eq!(db.header.info.spacing, [0.5, 0.7, 1.3]);
+    assert_eq!(db.header.info.voxel_type, VoxelType::I16);
+    assert_eq!(db.summary.value_min, vol.range().0);
+    assert_eq!(db.summary.value_max, vol.range().1);
+
+    // Source level: exact.
+    let leaf = level_grid(&db, l.leaf_level());
+    assert_eq!(leaf, vol.data);
+
+    // Every inner level is the 2×2×2 average of the level below (over the
+    // voxels that exist at odd edges).
+    let mut fine = leaf;
+    for level in (0..l.leaf_level()).rev() {
+        let coarse = level_grid(&db, level);
+        let (fd, cd) = (l.level_dims(level + 1), l.level_dims(level));
+        for k in 0..cd[2] {
+            for j in 0..cd[1] {
+                for i in 0..cd[0] {
+                    let (mut sum, mut n) = (0f64, 0);
+                    for dk in 0..2 {
+                        for dj in 0..2 {
+                            for di in 0..2 {
+                                let (x, y, z) = (2 * i + di, 2 * j + dj, 2 * k + dk);
+                                if x < fd[0] && y < fd[1] && z < fd[2] {
+                                    sum += fine[(z * fd[1] + y) * fd[0] + x] as f64;
+                                    n += 1;
+                                }
+                            }
+                        }
+                    }
+                    let want = sum / n as f64;
+                    let got = coarse[(k * cd[1] + j) * cd[0] + i] as f64;
+                    assert!(
+                        (got - want).abs() <= 1e-5 * want.abs().max(1.0),
+                        "level {level} voxel ({i},{j},{k}): {got} vs average {want}"
+                    );
+                }
+            }
+        }
+        fine = coarse;
+    }
+    info::verify(&db).unwrap();
+}
+
+#[test]
+fn quantised_bricks_stay_within_their_bound() {
+    let vol = test_volume([40, 33, 29]);
+    let dir = tempfile::tempdir().unwrap();
+    for enc in [BrickEncoding::U8Range, BrickEncoding::U16Range] {
+        let out = dir.path().join(format!("{}.pxo", enc.name()));
+        import(
+            &vol,
+            &out,
+            &ImportOptions {
+                brick: 16,
+                encoding: enc,
+                ..Default::default()
+            },
+        );
+        let db = OctreeDb::open(&out).unwrap();
+        let l = *db.layout();
+        let side = l.stored_side();
+        let mut worst_ratio = 0f64;
+        let mut max_err = 0f64;
+        for n in db.nodes.iter().filter(|n| n.key.level as u32 == l.leaf_level()) {
+            let v = db.read_brick(n.key).unwrap().unwrap();
+            let bound = enc.error_bound(n.min, n.max) + 1e-4;
+            let o = l.brick_origin(n.key);
+            for k in 0..side {
+                for j in 0..side {
+                    for i in 0..side {
+                        let c = |p: i64, d: usize| p.clamp(0, d as i64 - 1) as usize;
+                        let src = vol.voxel(
+                            c(o[0] + i as i64, 40),
+                            c(o[1] + j as i64, 33),
+                            c(o[2] + k as i64, 29),
+                        ) as f64;
+                        let err = (v[(k * side + j) * side + i] as f64 - src).abs();
+                        assert!(err <= bound, "{}: brick {} error {err} > {bound}", enc.name(), n.key);
+                        worst_ratio = worst_ratio.max(err / bound);
+                        max_err = max_err.max(err);
+                    }
+                }
+            }
+        }
+        // the import's own figures agree with what we measure
+        assert!(db.summary.quant_max <= max_err + 1e-9);
+        assert!(db.summary.quant_rms > 0.0 && db.summary.quant_rms <= db.summary.quant_max);
+        assert!(worst_ratio > 0.3, "the bound is tight ({worst_ratio})");
+    }
+}
+
+#[test]
+fn empty_bricks_are_dropped_and_counted() {
+    let dims = [64, 16, 16];
+    let vol = test_volume(dims); // x < 21 is −1000
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("e.pxo");
+    let r = import(
+        &vol,
+        &out,
+        &ImportOptions {
+            brick: 8,
+            empty_below: Some(-999.0),
+            ..Default::default()
+        },
+    );
+    let db = OctreeDb::open(&out).unwrap();
+    // Leaf bricks x = 0, 1 cover voxels 0..18 (overlap included): all −1000.
+    // Brick x = 2 reaches voxel 21 through its overlap: stored.
+    let per = info::bricks_per_level(&db);
+    let leaf = per[db.layout().leaf_level() as usize];
+    assert_eq!(leaf, (6 * 2 * 2, 2 * 2 * 2));
+    assert_eq!(r.empty, per.iter().map(|p| p.1).sum::<usize>());
+    for n in &db.nodes {
+        let expect_empty = n.max < -999.0;
+        assert_eq!(!n.is_stored(), expect_empty, "{}", n.key);
+        if !n.is_stored() {
+            assert!(db.read_brick(n.key).unwrap().is_none());
+        }
+    }
+}
+
+#[test]
+fn corruption_and_truncation_are_reported_with_the_brick() {
+    let vol = test_volume([32, 32, 32]);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("c.pxo");
+    import(
+        &vol,
+        &out,
+        &ImportOptions {
+            brick: 16,
+            ..Default::default()
+        },
+    );
+    let db = OctreeDb::open(&out).unwrap();
+    let victim = *db.nodes.iter().filter(|n| n.is_stored()).nth(3).unwrap();
+    drop(db);
+    let mut bytes = std::fs::read(&out).unwrap();
+    bytes[(victim.offset + victim.len as u64 / 2) as usize] ^= 0x40;
+    let bad = dir.path().join("bad.pxo");
+    std::fs::write(&bad, &bytes).unwrap();
+    let db = OctreeDb::open(&bad).unwrap();
+    let e = format!("{:#}", db.read_brick(victim.key).unwrap_err());
+    assert!(e.contains("bad.pxo") && e.contains(&victim.key.to_string()) && e.contains("checksum"), "{e}");
+    let e = format!("{:#}", info::verify(&db).unwrap_err());
+    assert!(e.contains(&victim.key.to_string()), "{e}");
+    // other bricks still read
+    let other = *db.nodes.iter().find(|n| n.is_stored() && n.key != victim.key).unwrap();
+    assert!(db.read_brick(other.key).unwrap().is_some());
+
+    // truncated file: no footer
+    std::fs::write(&bad, &bytes[..bytes.len() - 100]).unwrap();
+    let e = format!("{:#}", OctreeDb::open(&bad).err().unwrap());
+    assert!(e.contains("bad.pxo") && e.contains("truncated"), "{e}");
+    // corrupt node table
+    let mut b2 = std::fs::read(&out).unwrap();
+    let n = b2.len();
+    b2[n - 40] ^= 1;
+    std::fs::write(&bad, &b2).unwrap();
+    let e = format!("{:#}", OctreeDb::open(&bad).err().unwrap());
+    assert!(e.contains("node table"), "{e}");
+    // not a database at all
+    std::fs::write(&bad, b"hello world, this is not an octree database at all").unwrap();
+    let e = format!("{:#}", OctreeDb::open(&bad).err().unwrap());
+    assert!(e.contains("bad magic"), "{e}");
+}
+
+#[test]
+fn a_failed_import_keeps_the_existing_file_and_leaves_no_temporary() {
+    let vol = test_volume([64, 64, 64]);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("keep.pxo");
+    std::fs::write(&out, b"precious").unwrap();
+    let e = store::import(
+        &mut MemorySource::new(&vol),
+        &out,
+        "v",
+        &ImportOptions {
+            memory_mb: 0,
+            ..Default::default()
+        },
+    )
+    .unwrap_err();
+    assert!(format!("{e:#}").contains("--memory-mb"), "{e:#}");
+    // a source that fails halfway through
+    struct Failing<'a>(MemorySource<'a>, usize);
+    impl parallax_common::volume::VolumeSource for Failing<'_> {
+        fn info(&self) -> &parallax_common::volume::VolumeInfo {
+            self.0.info()
+        }
+        fn read_slices(&mut self, out: &mut [f32]) -> anyhow::Result<()> {
+            self.1 += 1;
+            anyhow::ensure!(self.1 < 40, "disk on fire");
+            self.0.read_slices(out)
+        }
+    }
+    let e = store::import(
+        &mut Failing(MemorySource::new(&vol), 0),
+        &out,
+        "v",
+        &ImportOptions::default(),
+    )
+    .unwrap_err();
+    assert!(format!("{e:#}").contains("disk on fire"));
+    assert_eq!(std::fs::read(&out).unwrap(), b"precious");
+    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(names.len(), 1, "{names:?}");
+}
+
+#[test]
+fn single_voxel_and_thin_volumes_import() {
+    let dir = tempfile::tempdir().unwrap();
+    for dims in [[1, 1, 1], [1, 50, 3], [100, 1, 1]] {
+        let vol = Volume::from_fn(dims, [1.0; 3], VoxelType::U8, |i, j, k| (i + 2 * j + 3 * k) as f32);
+        let out = dir.path().join("s.pxo");
+        import(&vol, &out, &ImportOptions { brick: 16, encoding: BrickEncoding::F32, ..Default::default() });
+        let db = OctreeDb::open(&out).unwrap();
+        assert_eq!(level_grid(&db, db.layout().leaf_level()), vol.data, "{dims:?}");
+        level_grid(&db, 0);
+    }
+}

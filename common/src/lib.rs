@@ -1,0 +1,11 @@
+//! Parallax common: what the front end, the back ends and the tools share.
+//!
+//! * [`camera`]: placement and the MCOP ray of a pixel (G10 §4 Eq. 1).
+//! * [`volume`]: scalar volumes and slice-by-slice sources.
+//! * [`tf`]: transfer functions and their pre-integration tables (G10 §4).
+//! * [`octree`]: the out-of-core octree database (`.pxo`) (G10 §5, G08 §3).
+
+pub mod camera;
+pub mod octree;
+pub mod tf;
+pub mod volume;

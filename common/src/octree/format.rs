@@ -1,0 +1,120 @@
+//! The `.pxo` file layout. One file, readable brick by brick:
+//!
+//! ```text
+//! 0      magic "PXOCTREE", version u32, header length u32, header CRC-32 u32
+//! 20     header (bincode): volume info, brick size, levels, encoding
+//! …      brick blobs (LZ4, each with its own CRC-32 in its node record)
+//! T      trailer (bincode): node records (sorted by level, z, y, x) and the
+//!        import summary
+//! end−32 footer: trailer offset u64, trailer length u64, trailer CRC-32 u32,
+//!        reserved u32, magic "PXOEND\0\0"
+//! ```
+//!
+//! All integers are little endian. The writer writes the trailer and footer
+//! last and renames the file into place only when complete, so a reader never
+//! sees a half-written database under its final name.
+
+use super::codec::BrickEncoding;
+use super::layout::{NodeKey, OctreeLayout};
+use crate::volume::VolumeInfo;
+use serde::{Deserialize, Serialize};
+
+pub const MAGIC: [u8; 8] = *b"PXOCTREE";
+pub const FOOTER_MAGIC: [u8; 8] = *b"PXOEND\0\0";
+pub const VERSION: u32 = 1;
+/// Bytes before the header: magic, version, header length, header CRC.
+pub const PREAMBLE_LEN: usize = 20;
+pub const FOOTER_LEN: usize = 32;
+
+/// The bincode configuration of every structure in the file (fixed-width
+/// little-endian integers, so record sizes do not depend on their values).
+pub fn bincode_config() -> impl bincode::config::Config {
+    bincode::config::standard()
+        .with_little_endian()
+        .with_fixed_int_encoding()
+}
+
+/// What is known before any voxel is read.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    pub info: VolumeInfo,
+    pub layout: OctreeLayout,
+    pub encoding: BrickEncoding,
+    /// Bricks whose values are all below this were dropped (not stored).
+    pub empty_below: Option<f32>,
+    /// Name of the file the database was imported from.
+    pub source: String,
+}
+
+/// One node of the octree, stored or empty.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NodeRecord {
+    pub key: NodeKey,
+    /// Range of the stored values, overlap included (the range the 8-bit codes
+    /// map to, and what empty-space tests under a transfer function use).
+    pub min: f32,
+    pub max: f32,
+    /// Mean and variance of the node's own voxels (inside the volume, overlap
+    /// excluded) — B10 §4.5 variance bricking.
+    pub mean: f32,
+    pub variance: f32,
+    /// Where the brick's bytes are; `len == 0` for an empty (dropped) brick.
+    pub offset: u64,
+    pub len: u32,
+    pub crc: u32,
+}
+
+impl NodeRecord {
+    pub fn is_stored(&self) -> bool {
+        self.len > 0
+    }
+}
+
+/// Figures gathered during import.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Smallest and largest source value.
+    pub value_min: f32,
+    pub value_max: f32,
+    /// Quantisation error of the stored source-level voxels, in data units.
+    pub quant_rms: f64,
+    pub quant_max: f64,
+    /// Voxels the error figures were measured on.
+    pub quant_samples: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Trailer {
+    pub nodes: Vec<NodeRecord>,
+    pub summary: Summary,
+}
+
+/// The fixed-size footer at the very end of the file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Footer {
+    pub trailer_offset: u64,
+    pub trailer_len: u64,
+    pub trailer_crc: u32,
+}
+
+impl Footer {
+    pub fn to_bytes(self) -> [u8; FOOTER_LEN] {
+        let mut b = [0u8; FOOTER_LEN];
+        b[0..8].copy_from_slice(&self.trailer_offset.to_le_bytes());
+        b[8..16].copy_from_slice(&self.trailer_len.to_le_bytes());
+        b[16..20].copy_from_slice(&self.trailer_crc.to_le_bytes());
+        b[24..32].copy_from_slice(&FOOTER_MAGIC);
+        b
+    }
+
+    pub fn from_bytes(b: &[u8; FOOTER_LEN]) -> Option<Self> {
+        if b[24..32] != FOOTER_MAGIC {
+            return None;
+        }
+        Some(Footer {
+            trailer_offset: u64::from_le_bytes(b[0..8].try_into().unwrap()),
+            trailer_len: u64::from_le_bytes(b[8..16].try_into().unwrap()),
+            trailer_crc: u32::from_le_bytes(b[16..20].try_into().unwrap()),
+        })
+    }
+}

@@ -1,0 +1,225 @@
+//! Scalar volumes as the rest of Parallax sees them: a grid of data values with
+//! voxel spacing, read slice by slice so that nothing needs the whole volume in
+//! memory (DESIGN.md "Data").
+//!
+//! Volume space (DESIGN.md conventions): voxel (i, j, k) has its centre at
+//! ((i+½)·sx, (j+½)·sy, (k+½)·sz); the volume is the box [0, N·s] on each axis;
+//! the field is the trilinear interpolant of the voxel values, clamped to the
+//! edge voxels inside the box.
+
+use serde::{Deserialize, Serialize};
+
+/// The sample type of a source volume. Values are always handed on as `f32`
+/// data values (exact for every integer type listed here).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum VoxelType {
+    U8,
+    U16,
+    I16,
+    F32,
+}
+
+impl VoxelType {
+    pub fn bytes(self) -> usize {
+        match self {
+            VoxelType::U8 => 1,
+            VoxelType::U16 | VoxelType::I16 => 2,
+            VoxelType::F32 => 4,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            VoxelType::U8 => "u8",
+            VoxelType::U16 => "u16",
+            VoxelType::I16 => "i16",
+            VoxelType::F32 => "f32",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "u8" | "uint8" => VoxelType::U8,
+            "u16" | "uint16" => VoxelType::U16,
+            "i16" | "int16" => VoxelType::I16,
+            "f32" | "float32" | "float" => VoxelType::F32,
+            _ => return None,
+        })
+    }
+
+    /// Smallest and largest representable value (data units).
+    pub fn limits(self) -> (f64, f64) {
+        match self {
+            VoxelType::U8 => (0.0, 255.0),
+            VoxelType::U16 => (0.0, 65535.0),
+            VoxelType::I16 => (-32768.0, 32767.0),
+            VoxelType::F32 => (f32::MIN as f64, f32::MAX as f64),
+        }
+    }
+}
+
+/// What is known about a volume before reading its voxels.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VolumeInfo {
+    /// Voxels along x, y, z (x varies fastest in memory and on disk).
+    pub dims: [usize; 3],
+    /// Voxel spacing in the data's length unit (mm for medical data).
+    pub spacing: [f64; 3],
+    /// Sample type of the source.
+    pub voxel_type: VoxelType,
+}
+
+impl VolumeInfo {
+    pub fn voxel_count(&self) -> u64 {
+        self.dims.iter().map(|&d| d as u64).product()
+    }
+
+    pub fn slice_len(&self) -> usize {
+        self.dims[0] * self.dims[1]
+    }
+
+    /// The volume's extent N·s on each axis (data length units).
+    pub fn extent(&self) -> [f64; 3] {
+        [
+            self.dims[0] as f64 * self.spacing[0],
+            self.dims[1] as f64 * self.spacing[1],
+            self.dims[2] as f64 * self.spacing[2],
+        ]
+    }
+
+    /// Bytes of the source data (for throughput and compression ratios).
+    pub fn source_bytes(&self) -> u64 {
+        self.voxel_count() * self.voxel_type.bytes() as u64
+    }
+}
+
+/// A volume that is read front to back, a few z-slices at a time.
+///
+/// Implementations read lazily, in increasing z, and check what they read:
+/// a truncated file or a NaN in float input is an error that names the file
+/// (and, for NaN, the voxel).
+pub trait VolumeSource {
+    fn info(&self) -> &VolumeInfo;
+    /// Fills `out` (whose length is a whole number of slices, `nx·ny` values
+    /// each, x fastest) with the next slices, as data values.
+    fn read_slices(&mut self, out: &mut [f32]) -> anyhow::Result<()>;
+}
+
+/// A whole volume in memory: the reference integrator's input and the small
+/// volumes of tests. Large volumes go through [`VolumeSource`] instead.
+#[derive(Clone, Debug)]
+pub struct Volume {
+    pub info: VolumeInfo,
+    /// `dims[0]·dims[1]·dims[2]` data values, x fastest.
+    pub data: Vec<f32>,
+}
+
+impl Volume {
+    pub fn new(info: VolumeInfo, data: Vec<f32>) -> Self {
+        assert_eq!(data.len() as u64, info.voxel_count(), "volume data size");
+        Volume { info, data }
+    }
+
+    /// Builds a volume from a function of the voxel index.
+    pub fn from_fn(
+        dims: [usize; 3],
+        spacing: [f64; 3],
+        voxel_type: VoxelType,
+        f: impl Fn(usize, usize, usize) -> f32,
+    ) -> Self {
+        let mut data = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    data.push(f(i, j, k));
+                }
+            }
+        }
+        Volume::new(
+            VolumeInfo {
+                dims,
+                spacing,
+                voxel_type,
+            },
+            data,
+        )
+    }
+
+    /// Reads a whole source into memory.
+    pub fn read_all(src: &mut dyn VolumeSource) -> anyhow::Result<Self> {
+        let info = src.info().clone();
+        let mut data = vec![0.0f32; info.voxel_count() as usize];
+        if !data.is_empty() {
+            src.read_slices(&mut data)?;
+        }
+        Ok(Volume { info, data })
+    }
+
+    #[inline]
+    pub fn voxel(&self, i: usize, j: usize, k: usize) -> f32 {
+        let [nx, ny, _] = self.info.dims;
+        self.data[(k * ny + j) * nx + i]
+    }
+
+    /// The scalar field at a point of volume space: the trilinear interpolant
+    /// of the voxel values, clamped to the edge voxels (DESIGN.md).
+    pub fn sample(&self, p: [f64; 3]) -> f64 {
+        let mut i0 = [0usize; 3];
+        let mut i1 = [0usize; 3];
+        let mut w = [0f64; 3];
+        for a in 0..3 {
+            let n = self.info.dims[a];
+            let u = (p[a] / self.info.spacing[a] - 0.5).clamp(0.0, (n - 1) as f64);
+            let f = u.floor();
+            i0[a] = f as usize;
+            i1[a] = (i0[a] + 1).min(n - 1);
+            w[a] = u - f;
+        }
+        let v = |i: usize, j: usize, k: usize| self.voxel(i, j, k) as f64;
+        let x00 = v(i0[0], i0[1], i0[2]) * (1.0 - w[0]) + v(i1[0], i0[1], i0[2]) * w[0];
+        let x10 = v(i0[0], i1[1], i0[2]) * (1.0 - w[0]) + v(i1[0], i1[1], i0[2]) * w[0];
+        let x01 = v(i0[0], i0[1], i1[2]) * (1.0 - w[0]) + v(i1[0], i0[1], i1[2]) * w[0];
+        let x11 = v(i0[0], i1[1], i1[2]) * (1.0 - w[0]) + v(i1[0], i1[1], i1[2]) * w[0];
+        let y0 = x00 * (1.0 - w[1]) + x10 * w[1];
+        let y1 = x01 * (1.0 - w[1]) + x11 * w[1];
+        y0 * (1.0 - w[2]) + y1 * w[2]
+    }
+
+    /// Smallest and largest voxel value.
+    pub fn range(&self) -> (f32, f32) {
+        self.data
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            })
+    }
+}
+
+/// An in-memory volume read as a source (tests, and synthetic data).
+pub struct MemorySource<'a> {
+    volume: &'a Volume,
+    next: usize,
+}
+
+impl<'a> MemorySource<'a> {
+    pub fn new(volume: &'a Volume) -> Self {
+        MemorySource { volume, next: 0 }
+    }
+}
+
+impl VolumeSource for MemorySource<'_> {
+    fn info(&self) -> &VolumeInfo {
+        &self.volume.info
+    }
+
+    fn read_slices(&mut self, out: &mut [f32]) -> anyhow::Result<()> {
+        let end = self.next + out.len();
+        anyhow::ensure!(
+            end <= self.volume.data.len(),
+            "read past the end of an in-memory volume"
+        );
+        out.copy_from_slice(&self.volume.data[self.next..end]);
+        self.next = end;
+        Ok(())
+    }
+}

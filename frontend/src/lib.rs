@@ -1,0 +1,1 @@
+//! Parallax front end: the coordinator.

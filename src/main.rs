@@ -1,0 +1,198 @@
+//! `parallax`: the command line (DESIGN.md "Command line").
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use parallax_backend::data::{self, synth::SynthKind, RawParams};
+use parallax_backend::store::{self, info, ImportOptions};
+use parallax_common::octree::{BrickEncoding, OctreeDb};
+use parallax_common::volume::VoxelType;
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(name = "parallax", version, about = "Massive volumes on light field displays and ordinary screens")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Write a procedural volume as NRRD (streamed: any size fits in memory).
+    Synth {
+        /// marschner-lobb | shells | shepp-logan | constant | plane | noise | stiff
+        kind: String,
+        #[arg(long)]
+        size: usize,
+        /// u8 | u16 | f32
+        #[arg(long = "type", default_value = "u8")]
+        voxel_type: String,
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Import a volume into the out-of-core octree database (.pxo).
+    Import {
+        /// .nrrd | .nhdr | .nii | .nii.gz | .raw (with --dims/--type/--spacing)
+        input: PathBuf,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Brick side in voxels (overlap excluded).
+        #[arg(long, default_value_t = 32)]
+        brick: usize,
+        /// Drop bricks whose values are all below this value.
+        #[arg(long, allow_hyphen_values = true)]
+        empty_below: Option<f32>,
+        /// u8 | u16 (quantised against each brick's range) | none (full precision)
+        #[arg(long, default_value = "u8")]
+        quantize: String,
+        /// Memory budget of the import (MiB).
+        #[arg(long, default_value_t = 2048)]
+        memory_mb: usize,
+        /// Raw input: X,Y,Z
+        #[arg(long)]
+        dims: Option<String>,
+        /// Raw input: u8 | u16 | i16 | f32
+        #[arg(long = "type")]
+        voxel_type: Option<String>,
+        /// Raw input: sx,sy,sz (default 1,1,1)
+        #[arg(long)]
+        spacing: Option<String>,
+        /// Raw input: bytes to skip before the data
+        #[arg(long, default_value_t = 0)]
+        byte_offset: u64,
+        /// Raw input: big-endian samples
+        #[arg(long)]
+        big_endian: bool,
+    },
+    /// Describe a database; --verify decodes and checks every brick.
+    Info {
+        database: PathBuf,
+        #[arg(long)]
+        verify: bool,
+    },
+}
+
+fn main() {
+    if let Err(e) = run(Cli::parse()) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Synth {
+            kind,
+            size,
+            voxel_type,
+            output,
+        } => {
+            let kind = SynthKind::parse(&kind).with_context(|| {
+                format!("synth: unknown kind '{kind}' (marschner-lobb, shells, shepp-logan, constant, plane, noise, stiff)")
+            })?;
+            let vt = parse_type(&voxel_type, "--type")?;
+            if size == 0 {
+                bail!("--size 0: a volume needs at least one voxel");
+            }
+            let bar = progress(size as u64, "synth");
+            data::synth::write_synth(kind, size, vt, &output, |_| bar.inc(1))?;
+            bar.finish_and_clear();
+            println!("wrote {} ({size}³ {})", output.display(), vt.name());
+        }
+        Command::Import {
+            input,
+            output,
+            brick,
+            empty_below,
+            quantize,
+            memory_mb,
+            dims,
+            voxel_type,
+            spacing,
+            byte_offset,
+            big_endian,
+        } => {
+            let encoding = BrickEncoding::parse(&quantize)
+                .with_context(|| format!("--quantize '{quantize}': expected u8, u16 or none"))?;
+            let raw = match (dims, voxel_type) {
+                (Some(d), Some(t)) => Some(RawParams {
+                    dims: parse_triple::<usize>(&d, "--dims")?,
+                    voxel_type: parse_type(&t, "--type")?,
+                    spacing: match spacing {
+                        Some(s) => parse_triple::<f64>(&s, "--spacing")?,
+                        None => [1.0; 3],
+                    },
+                    byte_offset,
+                    big_endian,
+                }),
+                (None, None) => None,
+                _ => bail!("raw input needs both --dims and --type"),
+            };
+            let mut src = data::open(&input, raw)?;
+            let opts = ImportOptions {
+                brick,
+                encoding,
+                empty_below,
+                memory_mb,
+                progress: std::io::stderr().is_terminal(),
+            };
+            let name = input.display().to_string();
+            let r = store::import(src.as_mut(), &output, &name, &opts)?;
+            println!(
+                "imported {} → {}: {} nodes ({} stored, {} empty), {:.1} MB → {:.1} MB in {:.2} s ({:.0} MB/s of source)",
+                name,
+                output.display(),
+                r.nodes,
+                r.stored,
+                r.empty,
+                r.source_bytes as f64 / 1e6,
+                r.file_bytes as f64 / 1e6,
+                r.seconds,
+                r.source_bytes as f64 / 1e6 / r.seconds.max(1e-9)
+            );
+        }
+        Command::Info { database, verify } => {
+            let db = OctreeDb::open(&database)?;
+            print!("{}", info::describe(&db));
+            if verify {
+                let r = info::verify(&db)?;
+                println!(
+                    "verify:        ok, {} bricks ({} bytes) decoded and checked",
+                    r.bricks, r.bytes
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+fn parse_type(s: &str, flag: &str) -> Result<VoxelType> {
+    VoxelType::parse(s).with_context(|| format!("{flag} '{s}': expected u8, u16, i16 or f32"))
+}
+
+fn parse_triple<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 3]> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        bail!("{flag} '{s}': expected three comma-separated numbers");
+    }
+    let mut out = Vec::with_capacity(3);
+    for p in parts {
+        out.push(
+            p.parse::<T>()
+                .map_err(|_| anyhow::anyhow!("{flag} '{s}': '{p}' is not a number"))?,
+        );
+    }
+    Ok(out.try_into().ok().unwrap())
+}
+
+fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(len),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(&format!("{what} {{bar:40}} {{pos}}/{{len}} ({{eta}} left)"))
+            .unwrap(),
+    );
+    bar
+}
