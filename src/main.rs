@@ -150,6 +150,9 @@ fn run(cli: Cli) -> Result<()> {
                 r.seconds,
                 r.source_bytes as f64 / 1e6 / r.seconds.max(1e-9)
             );
+            if let Some(kb) = peak_rss_kib() {
+                println!("peak resident memory: {:.1} MiB", kb as f64 / 1024.0);
+            }
         }
         Command::Info { database, verify } => {
             let db = OctreeDb::open(&database)?;
@@ -195,4 +198,11 @@ fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
             .unwrap(),
     );
     bar
+}
+
+/// Peak resident set size of this process (Linux: VmHWM), in KiB.
+fn peak_rss_kib() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
 }

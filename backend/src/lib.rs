@@ -3,5 +3,6 @@
 //! (the exact integral every image is measured against).
 
 pub mod data;
+pub mod index;
 pub mod reference;
 pub mod store;

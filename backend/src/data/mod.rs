@@ -98,11 +98,13 @@ pub(crate) fn check_info(
             bail!("{label}: {spacing_field}: spacing of axis {axis} is {s} (must be positive and finite)");
         }
     }
-    if info
-        .voxel_count()
-        .checked_mul(info.voxel_type.bytes() as u64)
-        .is_none()
-    {
+    let bytes = info
+        .dims
+        .iter()
+        .try_fold(info.voxel_type.bytes() as u64, |acc, &n| {
+            acc.checked_mul(n as u64)
+        });
+    if bytes.is_none() {
         bail!("{label}: {dims_field}: the volume is too large to address");
     }
     Ok(())
@@ -274,6 +276,20 @@ mod tests {
         assert_eq!(err, "a.nrrd: voxel (2,1,1) is NaN");
         let err = check_finite("a.nrrd", dims, 12, &[0.0, f32::NEG_INFINITY]).unwrap_err();
         assert_eq!(err.to_string(), "a.nrrd: voxel (1,0,1) is -infinity");
+    }
+
+    #[test]
+    fn absurd_sizes_are_rejected_not_overflowed() {
+        let info = VolumeInfo {
+            dims: [usize::MAX / 2, 1 << 20, 1 << 20],
+            spacing: [1.0; 3],
+            voxel_type: VoxelType::F32,
+        };
+        let err = check_info("big.nrrd", &info, "sizes", "spacings").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "big.nrrd: sizes: the volume is too large to address"
+        );
     }
 
     #[test]

@@ -196,17 +196,15 @@ pub fn read_header(path: &Path) -> Result<(NrrdHeader, BufReader<File>, u64)> {
         if text.starts_with('#') {
             continue;
         }
-        let field_sep = text.find(": ");
-        let kv_sep = text.find(":=");
-        let (field, value) = match (field_sep, kv_sep) {
-            (_, Some(kv)) if field_sep.is_none_or(|f| kv < f) => continue, // key:=value
-            (Some(f), _) => (&text[..f], text[f + 2..].trim()),
-            (None, None) => match text.find(':') {
-                Some(f) => (&text[..f], text[f + 1..].trim()),
-                None => bail!("{label}: header line '{text}' is not 'field: value'"),
-            },
-            (None, Some(_)) => unreachable!(),
+        // "field: value", or "key:=value" (free-form metadata, ignored).
+        let field_sep = text.find(": ").or_else(|| text.find(':'));
+        let Some(f) = field_sep else {
+            bail!("{label}: header line '{text}' is not 'field: value'");
         };
+        if text[f..].starts_with(":=") || text.find(":=").is_some_and(|kv| kv < f) {
+            continue;
+        }
+        let (field, value) = (&text[..f], text[f + 1..].trim());
         let value = value.to_string();
         match field.trim().to_ascii_lowercase().as_str() {
             "dimension" => dimension = Some(value),
@@ -545,8 +543,12 @@ impl NrrdWriter {
             self.written + n,
             self.info.voxel_count()
         );
-        check_finite(&label, self.info.dims, self.written, values)
-            .context("cannot write a non-finite value")?;
+        check_finite(
+            &format!("{label}: cannot write"),
+            self.info.dims,
+            self.written,
+            values,
+        )?;
         let mut buf = std::mem::take(&mut self.buf);
         buf.clear();
         encode_samples(values, self.info.voxel_type, false, &mut buf);

@@ -40,7 +40,9 @@ pub struct RawSource {
 
 impl RawSource {
     /// Wraps a stream positioned at the first sample. `info.voxel_type` is
-    /// the stored type (see [`RawSource::with_scale`] for scaled data).
+    /// the stored type (see [`RawSource::with_scale`] for scaled data);
+    /// `compressed` marks a gzip stream, read to its end after the last slice
+    /// so that a damaged trailer is reported rather than ignored.
     pub fn from_reader(
         label: impl Into<String>,
         info: VolumeInfo,

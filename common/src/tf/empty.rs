@@ -76,15 +76,19 @@ impl EmptinessTable {
         node_position(self.vmin, self.vmax, self.dx, self.n_bins, i)
     }
 
-    /// The bin j with s_j ≤ s < s_{j+1} (the last bin for s = vmax), for s in
-    /// [vmin, vmax], decided by the same node positions the table was built on.
-    fn bin_containing(&self, s: f64) -> usize {
+    /// For s in [vmin, vmax]: the bin j with s_j ≤ s < s_{j+1} (the last bin
+    /// for s = vmax), decided by the same node positions the table was built
+    /// on. With `upper`, the bin with s_j < s ≤ s_{j+1} instead (bin 0 for
+    /// s = vmin): a range ending exactly on a node needs no bin beyond it,
+    /// since the node's τ is part of the bin on its left.
+    fn bin_of(&self, s: f64, upper: bool) -> usize {
         let last = self.n_bins - 1;
         let mut j = (((s - self.vmin) / self.dx).max(0.0) as usize).min(last);
-        while j > 0 && s < self.node(j) {
+        let below = |x: f64| if upper { s <= x } else { s < x };
+        while j > 0 && below(self.node(j)) {
             j -= 1;
         }
-        while j < last && s >= self.node(j + 1) {
+        while j < last && !below(self.node(j + 1)) {
             j += 1;
         }
         j
@@ -109,7 +113,8 @@ impl EmptinessTable {
             // Entirely on one side of the table, and that side is empty.
             return true;
         }
-        let (jlo, jhi) = (self.bin_containing(lo), self.bin_containing(hi));
+        let jlo = self.bin_of(lo, false);
+        let jhi = self.bin_of(hi, true).max(jlo);
         self.prefix[jhi + 1] == self.prefix[jlo]
     }
 

@@ -185,9 +185,7 @@ impl TransferFunction {
 
     fn validated(points: Vec<ControlPoint>, origin: &str) -> Result<Self> {
         if points.is_empty() {
-            bail!(
-                "{origin}: no [[point]] tables: a transfer function needs at least one point"
-            );
+            bail!("{origin}: no [[point]] tables: a transfer function needs at least one point");
         }
         for (i, p) in points.iter().enumerate() {
             let n = i + 1;
@@ -253,10 +251,7 @@ impl TransferFunction {
     /// The largest importance anywhere (importance is piecewise linear, so
     /// its maximum is at a control point).
     pub fn max_importance(&self) -> f64 {
-        self.points
-            .iter()
-            .map(|p| p.importance)
-            .fold(0.0, f64::max)
+        self.points.iter().map(|p| p.importance).fold(0.0, f64::max)
     }
 
     /// The largest extinction anywhere.
@@ -279,9 +274,9 @@ impl TransferFunction {
             return optics_of(&pts[pts.len() - 1]);
         }
         let (p0, p1) = (&pts[i - 1], &pts[i]);
-        // p0.value <= s < p1.value, so the denominator is > 0. Halving keeps
-        // the difference finite for any pair of admissible values.
-        let t = ((s * 0.5 - p0.value * 0.5) / (p1.value * 0.5 - p0.value * 0.5)).clamp(0.0, 1.0);
+        // p0.value <= s < p1.value, so the denominator is > 0 (and finite,
+        // since |value| <= MAX_ABS_VALUE).
+        let t = ((s - p0.value) / (p1.value - p0.value)).clamp(0.0, 1.0);
         // (1−t)·a + t·b of non-negative a, b is non-negative and exact at
         // t = 0 and t = 1.
         let lerp = |a: f64, b: f64| (1.0 - t) * a + t * b;

@@ -24,10 +24,10 @@ mod tests;
 
 pub use empty::EmptinessTable;
 pub use function::{
-    ControlPoint, Optics, TransferFunction, DEFAULT_IMPORTANCE, DEFAULT_REFRACTION,
-    MAX_ABS_VALUE, MAX_EXTINCTION,
+    ControlPoint, Optics, TransferFunction, DEFAULT_IMPORTANCE, DEFAULT_REFRACTION, MAX_ABS_VALUE,
+    MAX_EXTINCTION,
 };
 pub use preint::{
-    alpha, emission_weight, premultiplied_color, Channel, PreintLayout, PreintTable,
-    SegmentOptics, DEFAULT_BINS, G10_EPSILON, MAX_BINS, MAX_LEVELS,
+    alpha, emission_weight, premultiplied_color, Channel, PreintLayout, PreintTable, SegmentOptics,
+    DEFAULT_BINS, G10_EPSILON, MAX_BINS, MAX_LEVELS,
 };

@@ -226,7 +226,9 @@ pub struct PreintTable {
 pub(crate) fn check_range(vmin: f64, vmax: f64, n_bins: usize) -> Result<(f64, f64, f64)> {
     for (name, v) in [("vmin", vmin), ("vmax", vmax)] {
         if !(v.is_finite() && v.abs() <= MAX_ABS_VALUE) {
-            bail!("table range: {name} must be finite with |{name}| <= {MAX_ABS_VALUE:e} (got {v})");
+            bail!(
+                "table range: {name} must be finite with |{name}| <= {MAX_ABS_VALUE:e} (got {v})"
+            );
         }
     }
     if vmin > vmax {
@@ -287,7 +289,11 @@ impl PreintTable {
             }
         }
         for table in &mut channels {
-            let level0: Vec<f64> = table.nodes.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
+            let level0: Vec<f64> = table
+                .nodes
+                .windows(2)
+                .map(|w| 0.5 * (w[0] + w[1]))
+                .collect();
             table.levels.push(level0);
             loop {
                 let prev = table.levels.last().expect("level 0 exists");
