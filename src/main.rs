@@ -10,7 +10,11 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 
 #[derive(Parser)]
-#[command(name = "parallax", version, about = "Massive volumes on light field displays and ordinary screens")]
+#[command(
+    name = "parallax",
+    version,
+    about = "Massive volumes on light field displays and ordinary screens"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -194,8 +198,10 @@ fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
         indicatif::ProgressDrawTarget::stderr(),
     );
     bar.set_style(
-        indicatif::ProgressStyle::with_template(&format!("{what} {{bar:40}} {{pos}}/{{len}} ({{eta}} left)"))
-            .unwrap(),
+        indicatif::ProgressStyle::with_template(&format!(
+            "{what} {{bar:40}} {{pos}}/{{len}} ({{eta}} left)"
+        ))
+        .unwrap(),
     );
     bar
 }

@@ -129,7 +129,11 @@ impl SpatialIndex {
             }
             i += 1;
         }
-        let at: HashMap<NodeKey, u32> = keys.iter().enumerate().map(|(i, k)| (*k, i as u32)).collect();
+        let at: HashMap<NodeKey, u32> = keys
+            .iter()
+            .enumerate()
+            .map(|(i, k)| (*k, i as u32))
+            .collect();
         let span = (global.1 - global.0).max(f32::MIN_POSITIVE);
         let unorm = |v: f32, up: bool| {
             let x = ((v - global.0) / span * 65535.0).clamp(0.0, 65535.0);
@@ -194,7 +198,8 @@ impl SpatialIndex {
             };
             let level = n.level() + 1;
             let scale = (1u64 << level) as f64;
-            let c: [u32; 3] = std::array::from_fn(|a| ((p[a] * scale).floor() as i64).rem_euclid(2) as u32);
+            let c: [u32; 3] =
+                std::array::from_fn(|a| ((p[a] * scale).floor() as i64).rem_euclid(2) as u32);
             i = first + (c[0] | c[1] << 1 | c[2] << 2);
         }
     }
@@ -217,9 +222,23 @@ mod tests {
     fn two_level_cut() -> HashMap<NodeKey, CutNode> {
         let mut cut = HashMap::new();
         let root = NodeKey::root();
-        cut.insert(root, CutNode { refined: true, slot: Some(0), min: 0.0, max: 100.0 });
+        cut.insert(
+            root,
+            CutNode {
+                refined: true,
+                slot: Some(0),
+                min: 0.0,
+                max: 100.0,
+            },
+        );
         for (i, c) in root.children().into_iter().enumerate() {
-            cut.insert(c, CutNode { refined: i == 0, ..leaf(Some(1 + i as u32)) });
+            cut.insert(
+                c,
+                CutNode {
+                    refined: i == 0,
+                    ..leaf(Some(1 + i as u32))
+                },
+            );
         }
         for (i, c) in root.children()[0].children().into_iter().enumerate() {
             cut.insert(c, leaf(if i == 7 { None } else { Some(20 + i as u32) }));
@@ -259,7 +278,15 @@ mod tests {
     #[test]
     fn ranges_round_outwards() {
         let mut cut = HashMap::new();
-        cut.insert(NodeKey::root(), CutNode { refined: false, slot: Some(0), min: 0.123, max: 0.456 });
+        cut.insert(
+            NodeKey::root(),
+            CutNode {
+                refined: false,
+                slot: Some(0),
+                min: 0.123,
+                max: 0.456,
+            },
+        );
         let idx = SpatialIndex::build(&cut, (0.0, 1.0)).unwrap();
         let (lo, hi) = idx.nodes[0].range((0.0, 1.0));
         assert!(lo <= 0.123 && lo > 0.123 - 2e-5);

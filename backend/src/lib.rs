@@ -3,6 +3,10 @@
 //! (the exact integral every image is measured against).
 
 pub mod data;
+pub mod gpu;
 pub mod index;
+pub mod loader;
+pub mod output;
+pub mod raycast;
 pub mod reference;
 pub mod store;

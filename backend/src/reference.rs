@@ -89,7 +89,13 @@ impl Default for Tolerance {
 
 /// The integral along the ray origin + t·dir (volume space, dir a unit
 /// vector, t ≥ 0 in data length units) through the volume's box.
-pub fn integrate(vol: &Volume, tf: &TransferFunction, origin: DVec3, dir: DVec3, tol: Tolerance) -> Rgba {
+pub fn integrate(
+    vol: &Volume,
+    tf: &TransferFunction,
+    origin: DVec3,
+    dir: DVec3,
+    tol: Tolerance,
+) -> Rgba {
     let ext = DVec3::from(vol.info.extent());
     let Some((t0, t1)) = clip_to_box(origin, dir, ext) else {
         return [0.0; 4];
@@ -154,8 +160,17 @@ fn cell_crossings(vol: &Volume, o: DVec3, d: DVec3, t0: f64, t1: f64) -> Vec<f64
 fn smooth_pieces(field: &impl Fn(f64) -> f64, a: f64, b: f64, kinks: &[f64]) -> Vec<f64> {
     let h = b - a;
     // The cubic p(u) = s(a + u·h) from its values at u = 0, ⅓, ⅔, 1.
-    let f = [field(a), field(a + h / 3.0), field(a + 2.0 * h / 3.0), field(b)];
-    let (lo, hi) = f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, m), &v| (l.min(v), m.max(v)));
+    let f = [
+        field(a),
+        field(a + h / 3.0),
+        field(a + 2.0 * h / 3.0),
+        field(b),
+    ];
+    let (lo, hi) = f
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, m), &v| {
+            (l.min(v), m.max(v))
+        });
     let mut cuts = vec![a, b];
     if hi == lo {
         return cuts; // a cubic with four equal values is constant
@@ -209,7 +224,11 @@ fn quadratic_roots(a: f64, b: f64, c: f64) -> Vec<f64> {
         return vec![];
     }
     if a.abs() <= 1e-14 * scale {
-        return if b.abs() > 1e-14 * scale { vec![-c / b] } else { vec![] };
+        return if b.abs() > 1e-14 * scale {
+            vec![-c / b]
+        } else {
+            vec![]
+        };
     }
     let disc = b * b - 4.0 * a * c;
     if disc < 0.0 {
@@ -276,10 +295,11 @@ impl Accumulator {
                 emission: std::array::from_fn(|c| left.emission[c] + t_left * right.emission[c]),
             };
             let t = self.transmittance();
-            let err = t * ((whole.depth - halves.depth).abs().min(1.0)
-                + (0..3)
-                    .map(|c| (whole.emission[c] - halves.emission[c]).abs())
-                    .fold(0.0, f64::max));
+            let err = t
+                * ((whole.depth - halves.depth).abs().min(1.0)
+                    + (0..3)
+                        .map(|c| (whole.emission[c] - halves.emission[c]).abs())
+                        .fold(0.0, f64::max));
             let allowed = self.tol * ((b - a) / self.length).max(1e-3);
             // A piece must also be optically thin: where τ·h is large the
             // emission is squeezed against the piece's start, between the
@@ -332,7 +352,13 @@ fn gauss(field: &impl Fn(f64) -> f64, tf: &TransferFunction, a: f64, b: f64) -> 
 
 /// Renders a whole view with the reference integrator: premultiplied RGBA,
 /// row 0 at the top.
-pub fn render(vol: &Volume, tf: &TransferFunction, placement: &Placement, view: &View, tol: Tolerance) -> Vec<Rgba> {
+pub fn render(
+    vol: &Volume,
+    tf: &TransferFunction,
+    placement: &Placement,
+    view: &View,
+    tol: Tolerance,
+) -> Vec<Rgba> {
     let [w, h] = view.resolution;
     let ext = vol.info.extent();
     (0..w * h)

@@ -51,7 +51,10 @@ fn level_grid(db: &OctreeDb, level: u32) -> Vec<f32> {
             }
         }
     }
-    assert!(grid.iter().all(|v| !v.is_nan()), "level {level} fully covered");
+    assert!(
+        grid.iter().all(|v| !v.is_nan()),
+        "level {level} fully covered"
+    );
     for (key, v) in bricks {
         let o = l.brick_origin(key);
         for k in 0..side {
@@ -155,7 +158,11 @@ fn quantised_bricks_stay_within_their_bound() {
         let side = l.stored_side();
         let mut worst_ratio = 0f64;
         let mut max_err = 0f64;
-        for n in db.nodes.iter().filter(|n| n.key.level as u32 == l.leaf_level()) {
+        for n in db
+            .nodes
+            .iter()
+            .filter(|n| n.key.level as u32 == l.leaf_level())
+        {
             let v = db.read_brick(n.key).unwrap().unwrap();
             let bound = enc.error_bound(n.min, n.max) + 1e-4;
             let o = l.brick_origin(n.key);
@@ -169,7 +176,12 @@ fn quantised_bricks_stay_within_their_bound() {
                             c(o[2] + k as i64, 29),
                         ) as f64;
                         let err = (v[(k * side + j) * side + i] as f64 - src).abs();
-                        assert!(err <= bound, "{}: brick {} error {err} > {bound}", enc.name(), n.key);
+                        assert!(
+                            err <= bound,
+                            "{}: brick {} error {err} > {bound}",
+                            enc.name(),
+                            n.key
+                        );
                         worst_ratio = worst_ratio.max(err / bound);
                         max_err = max_err.max(err);
                     }
@@ -236,11 +248,18 @@ fn corruption_and_truncation_are_reported_with_the_brick() {
     std::fs::write(&bad, &bytes).unwrap();
     let db = OctreeDb::open(&bad).unwrap();
     let e = format!("{:#}", db.read_brick(victim.key).unwrap_err());
-    assert!(e.contains("bad.pxo") && e.contains(&victim.key.to_string()) && e.contains("checksum"), "{e}");
+    assert!(
+        e.contains("bad.pxo") && e.contains(&victim.key.to_string()) && e.contains("checksum"),
+        "{e}"
+    );
     let e = format!("{:#}", info::verify(&db).unwrap_err());
     assert!(e.contains(&victim.key.to_string()), "{e}");
     // other bricks still read
-    let other = *db.nodes.iter().find(|n| n.is_stored() && n.key != victim.key).unwrap();
+    let other = *db
+        .nodes
+        .iter()
+        .find(|n| n.is_stored() && n.key != victim.key)
+        .unwrap();
     assert!(db.read_brick(other.key).unwrap().is_some());
 
     // truncated file: no footer
@@ -298,7 +317,10 @@ fn a_failed_import_keeps_the_existing_file_and_leaves_no_temporary() {
     .unwrap_err();
     assert!(format!("{e:#}").contains("disk on fire"));
     assert_eq!(std::fs::read(&out).unwrap(), b"precious");
-    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(names.len(), 1, "{names:?}");
 }
 
@@ -306,11 +328,25 @@ fn a_failed_import_keeps_the_existing_file_and_leaves_no_temporary() {
 fn single_voxel_and_thin_volumes_import() {
     let dir = tempfile::tempdir().unwrap();
     for dims in [[1, 1, 1], [1, 50, 3], [100, 1, 1]] {
-        let vol = Volume::from_fn(dims, [1.0; 3], VoxelType::U8, |i, j, k| (i + 2 * j + 3 * k) as f32);
+        let vol = Volume::from_fn(dims, [1.0; 3], VoxelType::U8, |i, j, k| {
+            (i + 2 * j + 3 * k) as f32
+        });
         let out = dir.path().join("s.pxo");
-        import(&vol, &out, &ImportOptions { brick: 16, encoding: BrickEncoding::F32, ..Default::default() });
+        import(
+            &vol,
+            &out,
+            &ImportOptions {
+                brick: 16,
+                encoding: BrickEncoding::F32,
+                ..Default::default()
+            },
+        );
         let db = OctreeDb::open(&out).unwrap();
-        assert_eq!(level_grid(&db, db.layout().leaf_level()), vol.data, "{dims:?}");
+        assert_eq!(
+            level_grid(&db, db.layout().leaf_level()),
+            vol.data,
+            "{dims:?}"
+        );
         level_grid(&db, 0);
     }
 }

@@ -23,7 +23,8 @@ fn tf(points: &[(f64, [f64; 3], f64)]) -> TransferFunction {
 /// linear in t through the knots (t_k, c_k): the exact answer.
 fn const_tau(knots: &[(f64, f64)], tau: f64) -> f64 {
     // ∫ τ(a + b t) e^{−τt} = −(a + b t) e^{−τt} − (b/τ) e^{−τt}
-    let prim = |a: f64, b: f64, t: f64| -(a + b * t) * (-tau * t).exp() - b / tau * (-tau * t).exp();
+    let prim =
+        |a: f64, b: f64, t: f64| -(a + b * t) * (-tau * t).exp() - b / tau * (-tau * t).exp();
     knots
         .windows(2)
         .map(|w| {
@@ -44,7 +45,10 @@ fn constant_volume_matches_the_closed_form() {
     // along x through the middle, and obliquely
     for (o, d) in [
         (DVec3::new(-5.0, 5.0, 2.25), DVec3::X),
-        (DVec3::new(-1.0, -1.0, -1.0), DVec3::new(1.0, 1.3, 0.7).normalize()),
+        (
+            DVec3::new(-1.0, -1.0, -1.0),
+            DVec3::new(1.0, 1.3, 0.7).normalize(),
+        ),
     ] {
         let ext = DVec3::new(7.0, 10.0, 4.5);
         let (t0, t1) = parallax_backend::reference::clip_to_box(o, d, ext).unwrap();
@@ -52,7 +56,11 @@ fn constant_volume_matches_the_closed_form() {
         let a = 1.0 - (-tau * len).exp();
         let got = integrate(&vol, &f, o, d, TIGHT);
         for ch in 0..3 {
-            assert!((got[ch] - c[ch] * a).abs() < 1e-9, "{got:?} vs {}", c[ch] * a);
+            assert!(
+                (got[ch] - c[ch] * a).abs() < 1e-9,
+                "{got:?} vs {}",
+                c[ch] * a
+            );
         }
         assert!((got[3] - a).abs() < 1e-9);
     }
@@ -65,7 +73,10 @@ fn linear_ramp_matches_the_closed_form() {
     let vol = Volume::from_fn([n, 3, 3], [s, 1.0, 1.0], VoxelType::U8, |i, _, _| i as f32);
     let tau = 0.4;
     // colour ramps with the value: red 0 → 1 over [0, n−1]; τ constant
-    let f = tf(&[(0.0, [0.0, 0.0, 0.0], tau), ((n - 1) as f64, [1.0, 0.0, 0.0], tau)]);
+    let f = tf(&[
+        (0.0, [0.0, 0.0, 0.0], tau),
+        ((n - 1) as f64, [1.0, 0.0, 0.0], tau),
+    ]);
     let got = integrate(&vol, &f, DVec3::new(-3.0, 1.5, 1.5), DVec3::X, TIGHT);
     // field: 0 until the first voxel centre, linear to n−1 at the last centre, then n−1
     let l = n as f64 * s;
@@ -150,7 +161,12 @@ fn varying_extinction_and_a_delta_peak_match_brute_force() {
     let got = integrate(&vol, &f, o, d, TIGHT);
     let want = brute(&vol, &f, o, d, 2_000_000);
     for ch in 0..4 {
-        assert!((got[ch] - want[ch]).abs() < 2e-6, "channel {ch}: {} vs {}", got[ch], want[ch]);
+        assert!(
+            (got[ch] - want[ch]).abs() < 2e-6,
+            "channel {ch}: {} vs {}",
+            got[ch],
+            want[ch]
+        );
     }
     assert!(got[3] > 0.1, "the ray sees something: {got:?}");
 }
@@ -159,13 +175,25 @@ fn varying_extinction_and_a_delta_peak_match_brute_force() {
 fn stiff_and_tiny_extinctions_stay_finite_and_precise() {
     let vol = Volume::from_fn([8, 8, 8], [1.0; 3], VoxelType::U8, |_, _, _| 1.0);
     let o = DVec3::new(4.0, 4.0, -1.0);
-    let huge = integrate(&vol, &tf(&[(0.0, [0.3, 0.6, 0.9], 1e6)]), o, DVec3::Z, Tolerance::default());
+    let huge = integrate(
+        &vol,
+        &tf(&[(0.0, [0.3, 0.6, 0.9], 1e6)]),
+        o,
+        DVec3::Z,
+        Tolerance::default(),
+    );
     // the ray stops once the rest could change nothing by more than the tolerance
     assert!(1.0 - huge[3] < 1e-8 && huge[3] <= 1.0, "{huge:?}");
     for (ch, want) in [0.3, 0.6, 0.9].iter().enumerate() {
         assert!((huge[ch] - want).abs() < 1e-7, "{huge:?}");
     }
-    let tiny = integrate(&vol, &tf(&[(0.0, [1.0, 1.0, 1.0], 1e-6)]), o, DVec3::Z, TIGHT);
+    let tiny = integrate(
+        &vol,
+        &tf(&[(0.0, [1.0, 1.0, 1.0], 1e-6)]),
+        o,
+        DVec3::Z,
+        TIGHT,
+    );
     // A = 1 − e^{−8e−6}: relative precision, not just absolute
     let want = -(-8e-6f64).exp_m1();
     assert!(((tiny[3] - want) / want).abs() < 1e-9, "{tiny:?}");
@@ -177,7 +205,10 @@ fn rays_that_miss_graze_or_start_inside() {
     let vol = Volume::from_fn([8, 8, 8], [1.0; 3], VoxelType::U8, |i, _, _| i as f32);
     let f = tf(&[(0.0, [1.0, 1.0, 1.0], 0.5)]);
     // misses
-    assert_eq!(integrate(&vol, &f, DVec3::new(-1.0, -1.0, -1.0), DVec3::NEG_X, TIGHT), [0.0; 4]);
+    assert_eq!(
+        integrate(&vol, &f, DVec3::new(-1.0, -1.0, -1.0), DVec3::NEG_X, TIGHT),
+        [0.0; 4]
+    );
     // along a face: zero length inside, no NaN
     let g = integrate(&vol, &f, DVec3::new(-1.0, 0.0, 0.0), DVec3::X, TIGHT);
     assert!(g.iter().all(|v| v.is_finite() && *v >= 0.0));
@@ -189,14 +220,21 @@ fn rays_that_miss_graze_or_start_inside() {
 #[test]
 fn a_rendered_window_is_finite_and_sees_the_volume() {
     let vol = Volume::from_fn([10, 10, 10], [1.0; 3], VoxelType::U8, |i, j, k| {
-        let r2 = [i, j, k].iter().map(|&x| (x as f64 - 4.5).powi(2)).sum::<f64>();
+        let r2 = [i, j, k]
+            .iter()
+            .map(|&x| (x as f64 - 4.5).powi(2))
+            .sum::<f64>();
         if r2 < 16.0 {
             200.0
         } else {
             0.0
         }
     });
-    let f = tf(&[(0.0, [0.0; 3], 0.0), (100.0, [1.0, 0.8, 0.6], 0.0), (200.0, [1.0, 0.8, 0.6], 0.5)]);
+    let f = tf(&[
+        (0.0, [0.0; 3], 0.0),
+        (100.0, [1.0, 0.8, 0.6], 0.0),
+        (200.0, [1.0, 0.8, 0.6], 0.5),
+    ]);
     let pl = Placement {
         center: [0.0, 0.0, 0.0],
         rotation_deg: [0.0, 30.0, 0.0],
@@ -205,7 +243,10 @@ fn a_rendered_window_is_finite_and_sees_the_volume() {
     let view = View::window([16, 12], [0.32, 0.24], [0.0, 0.0, 1.0]);
     let img = render(&vol, &f, &pl, &view, Tolerance::default());
     assert_eq!(img.len(), 16 * 12);
-    assert!(img.iter().flatten().all(|v| v.is_finite() && *v >= 0.0 && *v <= 1.0 + 1e-12));
+    assert!(img
+        .iter()
+        .flatten()
+        .all(|v| v.is_finite() && *v >= 0.0 && *v <= 1.0 + 1e-12));
     // the centre pixel sees the ball, a corner pixel sees nothing
     assert!(img[6 * 16 + 8][3] > 0.9);
     assert_eq!(img[0], [0.0; 4]);

@@ -122,8 +122,7 @@ pub fn import(
         ProgressBar::hidden()
     };
     bar.set_style(
-        ProgressStyle::with_template("importing {bar:40} {pos}/{len} slices ({eta} left)")
-            .unwrap(),
+        ProgressStyle::with_template("importing {bar:40} {pos}/{len} slices ({eta} left)").unwrap(),
     );
 
     let (mut vmin, mut vmax) = (f32::INFINITY, f32::NEG_INFINITY);

@@ -209,7 +209,15 @@ mod tests {
     fn constant_brick_decodes_exactly() {
         let v = vec![42.5f32; 64];
         let s = encode(&v, 42.5, 42.5, BrickEncoding::U8Range);
-        let d = decode(&s, crc32fast::hash(&s), 42.5, 42.5, BrickEncoding::U8Range, 64).unwrap();
+        let d = decode(
+            &s,
+            crc32fast::hash(&s),
+            42.5,
+            42.5,
+            BrickEncoding::U8Range,
+            64,
+        )
+        .unwrap();
         assert!(d.iter().all(|&x| x == 42.5));
     }
 

@@ -45,7 +45,11 @@ impl NodeKey {
 
 impl std::fmt::Display for NodeKey {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "level {} ({}, {}, {})", self.level, self.x, self.y, self.z)
+        write!(
+            f,
+            "level {} ({}, {}, {})",
+            self.level, self.x, self.y, self.z
+        )
     }
 }
 

@@ -4,8 +4,8 @@
 
 use super::codec::{self, BrickEncoding};
 use super::format::{
-    bincode_config, Footer, Header, NodeRecord, Summary, Trailer, FOOTER_LEN, MAGIC,
-    PREAMBLE_LEN, VERSION,
+    bincode_config, Footer, Header, NodeRecord, Summary, Trailer, FOOTER_LEN, MAGIC, PREAMBLE_LEN,
+    VERSION,
 };
 use super::layout::{NodeKey, OctreeLayout};
 use anyhow::{bail, Context, Result};

@@ -1,0 +1,340 @@
+//! Where a node is and how large its voxels look: node boxes in volume space,
+//! projected voxel size per view (G08 §4, L12 §4.2 "the projected size of a
+//! voxel"), and the view-frustum test (G08 §4, L12 §4.2).
+
+use glam::DVec3;
+use parallax_common::camera::{Placement, View};
+use parallax_common::octree::{NodeKey, OctreeLayout};
+
+/// Observer closer than this (metres) to a node's box counts as inside it:
+/// the node's voxels project to an unbounded number of pixels.
+const TOUCHING_M: f64 = 1e-9;
+
+/// The static geometry of a database: layout, voxel spacing, extent.
+#[derive(Clone, Debug)]
+pub(crate) struct Geometry {
+    pub layout: OctreeLayout,
+    pub spacing: [f64; 3],
+    pub extent: [f64; 3],
+}
+
+impl Geometry {
+    pub fn new(layout: OctreeLayout, spacing: [f64; 3]) -> Self {
+        let extent = std::array::from_fn(|a| layout.dims[a] as f64 * spacing[a]);
+        Geometry {
+            layout,
+            spacing,
+            extent,
+        }
+    }
+
+    /// The node's region of the volume, [lo, hi] in volume space (data
+    /// units): brick · 2^(L−l) · spacing · [x, x+1], clamped to the extent.
+    pub fn node_box(&self, key: NodeKey) -> (DVec3, DVec3) {
+        let span = (self.layout.brick as f64) * self.layout.voxel_scale(key.level as u32) as f64;
+        let c = [key.x, key.y, key.z];
+        let lo: [f64; 3] =
+            std::array::from_fn(|a| (c[a] as f64 * span * self.spacing[a]).min(self.extent[a]));
+        let hi: [f64; 3] = std::array::from_fn(|a| {
+            ((c[a] as f64 + 1.0) * span * self.spacing[a]).min(self.extent[a])
+        });
+        (DVec3::from(lo), DVec3::from(hi))
+    }
+
+    /// Edge of a level-`level` voxel in data units: 2^(L−l) · min(spacing).
+    pub fn voxel_len(&self, level: u32) -> f64 {
+        let s = self.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
+        self.layout.voxel_scale(level) as f64 * s
+    }
+}
+
+/// One view, prepared for a frame.
+#[derive(Clone, Debug)]
+struct ViewGeom {
+    /// The observer V in display space and in volume space.
+    observer: DVec3,
+    observer_vol: DVec3,
+    /// Distance from the observer to the screen plane, |V_z|.
+    screen_dist: f64,
+    /// Width of one of the view's pixels on the screen (m).
+    pixel_m: f64,
+    /// Inward normals of the four side planes of the pyramid from the
+    /// observer through the view's screen region; `None` = no culling (η > 0,
+    /// or a degenerate view).
+    planes: Option<[DVec3; 4]>,
+}
+
+/// What refinement needs to know about a node this frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Assessment {
+    /// Projected voxel size in display pixels: the largest over the views
+    /// that may see the node (G10 §5: the finest requirement among this
+    /// process's views); over all views when none does.
+    pub pixels: f64,
+    /// Whether at least one view frustum contains (part of) the node.
+    pub seen: bool,
+}
+
+/// The views of one frame in the placement of one frame.
+pub(crate) struct FrameGeometry {
+    geom: Geometry,
+    placement: Placement,
+    scale: f64,
+    views: Vec<ViewGeom>,
+    any_planes: bool,
+}
+
+impl FrameGeometry {
+    pub fn new(geom: &Geometry, views: &[View], placement: &Placement) -> Self {
+        let scale = placement.scale(geom.extent);
+        let views: Vec<ViewGeom> = views
+            .iter()
+            .map(|v| {
+                let observer = DVec3::from(v.observer);
+                let (observer_vol, _) = placement.ray_to_volume(geom.extent, observer, DVec3::X);
+                ViewGeom {
+                    observer,
+                    observer_vol,
+                    screen_dist: v.observer[2].abs(),
+                    pixel_m: v.region[2] / v.resolution[0].max(1) as f64,
+                    planes: if v.eta == 0.0 {
+                        frustum_planes(observer, v.region)
+                    } else {
+                        None
+                    },
+                }
+            })
+            .collect();
+        let any_planes = views.iter().any(|v| v.planes.is_some());
+        FrameGeometry {
+            geom: geom.clone(),
+            placement: *placement,
+            scale,
+            views,
+            any_planes,
+        }
+    }
+
+    /// Projected voxel size and frustum status of a node.
+    ///
+    /// For a view: pixels = voxel_m · D / (dist · pixel_m), voxel_m the
+    /// node's voxel edge in display metres, D = |V_z| the observer's distance
+    /// to the screen, dist the distance from the observer to the closest point
+    /// of the node's box in display space, pixel_m = region width / W
+    /// (G08 §4 "projected screen-space size of voxels", L12 §4.2). The
+    /// placement is a similarity (rotation and uniform scale), so the closest
+    /// point of the display-space box is found exactly by clamping the
+    /// observer, mapped to volume space, to the box there. dist ≈ 0 (the
+    /// observer inside or on the box) gives +∞.
+    pub fn assess(&self, key: NodeKey) -> Assessment {
+        let (lo, hi) = self.geom.node_box(key);
+        let voxel_m = self.geom.voxel_len(key.level as u32) * self.scale;
+        let corners = self.any_planes.then(|| self.corners(lo, hi));
+        let mut best_seen = f64::NEG_INFINITY;
+        let mut best_any = f64::NEG_INFINITY;
+        let mut seen = false;
+        for v in &self.views {
+            let closest = v.observer_vol.clamp(lo, hi);
+            let dist = (closest - v.observer_vol).length() * self.scale;
+            let px = if dist <= TOUCHING_M {
+                f64::INFINITY
+            } else if v.pixel_m > 0.0 {
+                voxel_m * v.screen_dist / (dist * v.pixel_m)
+            } else {
+                f64::INFINITY
+            };
+            best_any = best_any.max(px);
+            let inside = match (&v.planes, &corners) {
+                (Some(planes), Some(c)) => box_in_pyramid(v.observer, planes, c),
+                _ => true,
+            };
+            if inside {
+                seen = true;
+                best_seen = best_seen.max(px);
+            }
+        }
+        let pixels = if seen { best_seen } else { best_any };
+        Assessment {
+            // no views (−∞) or a degenerate one (NaN): nothing to refine for
+            pixels: if pixels.is_nan() {
+                0.0
+            } else {
+                pixels.max(0.0)
+            },
+            seen,
+        }
+    }
+
+    fn corners(&self, lo: DVec3, hi: DVec3) -> [DVec3; 8] {
+        std::array::from_fn(|c| {
+            let p = DVec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            );
+            self.placement.to_display(self.geom.extent, p)
+        })
+    }
+}
+
+/// The four side planes (inward normals, through the apex) of the pyramid
+/// from `apex` through the screen rectangle `region` = [x0, y0, w, h] on
+/// z = 0. `None` when the pyramid is degenerate (apex on the screen plane or
+/// an empty region): such a view culls nothing.
+fn frustum_planes(apex: DVec3, region: [f64; 4]) -> Option<[DVec3; 4]> {
+    let [x0, y0, w, h] = region;
+    if !(w > 0.0 && h > 0.0) || apex.z.abs() < 1e-12 || !apex.is_finite() {
+        return None;
+    }
+    let q = [
+        DVec3::new(x0, y0, 0.0),
+        DVec3::new(x0 + w, y0, 0.0),
+        DVec3::new(x0 + w, y0 + h, 0.0),
+        DVec3::new(x0, y0 + h, 0.0),
+    ];
+    let mid = DVec3::new(x0 + w / 2.0, y0 + h / 2.0, 0.0) - apex;
+    Some(std::array::from_fn(|e| {
+        let n = (q[e] - apex).cross(q[(e + 1) % 4] - apex);
+        if n.dot(mid) < 0.0 {
+            -n
+        } else {
+            n
+        }
+    }))
+}
+
+/// Conservative box-in-pyramid test: the box is outside when all eight
+/// corners lie strictly outside one of the side planes.
+fn box_in_pyramid(apex: DVec3, planes: &[DVec3; 4], corners: &[DVec3; 8]) -> bool {
+    planes
+        .iter()
+        .all(|n| corners.iter().any(|c| n.dot(*c - apex) >= 0.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn geom() -> Geometry {
+        // 64³ voxels of 0.5 × 0.5 × 1.0, bricks of 8: L = 3.
+        Geometry::new(OctreeLayout::new([64, 64, 64], 8), [0.5, 0.5, 1.0])
+    }
+
+    #[test]
+    fn node_boxes_cover_and_clamp() {
+        let g = Geometry::new(OctreeLayout::new([40, 64, 64], 8), [1.0, 1.0, 1.0]);
+        assert_eq!(g.layout.levels, 4);
+        // root covers 64 voxels, clamped to the 40-voxel x extent
+        let (lo, hi) = g.node_box(NodeKey::root());
+        assert_eq!(lo, DVec3::ZERO);
+        assert_eq!(hi, DVec3::new(40.0, 64.0, 64.0));
+        let (lo, hi) = g.node_box(NodeKey::new(2, 1, 2, 3));
+        assert_eq!(lo, DVec3::new(16.0, 32.0, 48.0));
+        assert_eq!(hi, DVec3::new(32.0, 48.0, 64.0));
+        assert_eq!(g.voxel_len(3), 1.0);
+        assert_eq!(g.voxel_len(0), 8.0);
+    }
+
+    #[test]
+    fn projected_size_matches_the_formula() {
+        let g = geom();
+        // extent 32 × 32 × 64: scale = 0.3 / 64 m per data unit
+        let pl = Placement {
+            center: [0.0, 0.0, 0.0],
+            rotation_deg: [0.0, 0.0, 0.0],
+            size: 0.3,
+        };
+        let v = View::window([64, 64], [0.4, 0.4], [0.0, 0.0, 2.0]);
+        let f = FrameGeometry::new(&g, &[v], &pl);
+        let a = f.assess(NodeKey::root());
+        // voxel edge at level 0: 8 · 0.5 = 4 data units = 4 · 0.3/64 m;
+        // closest point: the box front at z = +0.15, dist = 1.85.
+        let voxel_m = 4.0 * 0.3 / 64.0;
+        let want = voxel_m * 2.0 / (1.85 * (0.4 / 64.0));
+        assert!(
+            (a.pixels - want).abs() < 1e-9 * want,
+            "{} vs {want}",
+            a.pixels
+        );
+        assert!(a.seen);
+        // an observer inside the box: infinite
+        let inside = View::window([64, 64], [0.4, 0.4], [0.0, 0.0, 0.1]);
+        let f = FrameGeometry::new(&g, &[inside], &pl);
+        assert_eq!(f.assess(NodeKey::root()).pixels, f64::INFINITY);
+        // the finest of two views wins
+        let far = View::window([64, 64], [0.4, 0.4], [0.0, 0.0, 20.0]);
+        let f = FrameGeometry::new(&g, &[far, v], &pl);
+        assert!((f.assess(NodeKey::root()).pixels - want).abs() < 1e-9 * want);
+    }
+
+    #[test]
+    fn rotation_keeps_the_distance() {
+        let g = geom();
+        let v = View::window([64, 64], [0.4, 0.4], [0.05, 0.02, 1.0]);
+        let key = NodeKey::new(3, 7, 0, 0); // at the back
+        let mut sizes = Vec::new();
+        for rot in [[0.0, 0.0, 0.0], [0.0, 180.0, 0.0]] {
+            let pl = Placement {
+                center: [0.0, 0.0, 0.0],
+                rotation_deg: rot,
+                size: 0.3,
+            };
+            let f = FrameGeometry::new(&g, &[v], &pl);
+            // brute force: nearest of a dense sample of the display-space box
+            let (lo, hi) = g.node_box(key);
+            let mut best = f64::INFINITY;
+            for i in 0..=20 {
+                for j in 0..=20 {
+                    for k in 0..=20 {
+                        let t = DVec3::new(i as f64, j as f64, k as f64) / 20.0;
+                        let p = pl.to_display(g.extent, lo + (hi - lo) * t);
+                        best = best.min((p - DVec3::from(v.observer)).length());
+                    }
+                }
+            }
+            let voxel_m = g.voxel_len(3) * pl.scale(g.extent);
+            let want = voxel_m * 1.0 / (best * 0.4 / 64.0);
+            let got = f.assess(key).pixels;
+            assert!((got - want).abs() <= 1e-9 * want, "{got} vs {want}");
+            sizes.push(got);
+        }
+        // turned around, the back node comes to the front: larger
+        assert!(sizes[1] > 1.25 * sizes[0], "{sizes:?}");
+    }
+
+    #[test]
+    fn frustum_culls_what_is_beside_the_view() {
+        let g = geom();
+        let pl = Placement {
+            center: [0.0, 0.0, 0.0],
+            rotation_deg: [0.0, 0.0, 0.0],
+            size: 0.3,
+        };
+        let ahead = View::window([64, 64], [0.4, 0.4], [0.0, 0.0, 1.0]);
+        let mut aside = ahead;
+        aside.region = [5.0, 5.0, 0.4, 0.4];
+        let f = FrameGeometry::new(&g, &[aside], &pl);
+        assert!(!f.assess(NodeKey::root()).seen);
+        let f = FrameGeometry::new(&g, &[ahead], &pl);
+        assert!(f.assess(NodeKey::root()).seen);
+        // a narrow region right of centre: the left half of the volume is out
+        let mut right = ahead;
+        right.region = [0.03, -0.2, 0.1, 0.4];
+        let f = FrameGeometry::new(&g, &[right], &pl);
+        assert!(!f.assess(NodeKey::new(1, 0, 0, 0)).seen);
+        assert!(f.assess(NodeKey::new(1, 1, 0, 0)).seen);
+        // behind the observer (the pyramid opens towards −z): out
+        let mut behind = ahead;
+        behind.region = [-0.2, -0.2, 0.4, 0.4];
+        let pl_front = Placement {
+            center: [0.0, 0.0, 2.0],
+            ..pl
+        };
+        let f = FrameGeometry::new(&g, &[behind], &pl_front);
+        assert!(!f.assess(NodeKey::root()).seen);
+        // η > 0: never culled
+        aside.eta = 1.0;
+        let f = FrameGeometry::new(&g, &[aside], &pl);
+        assert!(f.assess(NodeKey::root()).seen);
+    }
+}

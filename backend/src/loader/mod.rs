@@ -1,0 +1,611 @@
+//! The adaptive loader: each frame, a view- and transfer-function-dependent
+//! cut of the out-of-core octree, kept in a CPU level-2 cache and a GPU brick
+//! pool, fed by asynchronous reads (G08 §4, G10 §5 "GPU cache and spatial
+//! index" and "Visibility feedback and adaptive loader", L12 §4.2).
+//!
+//! Per frame ([`Loader::update`]):
+//!
+//! 1. Bricks the I/O threads finished since the last frame enter the CPU
+//!    cache (never waiting for one).
+//! 2. The last frame's visibility feedback, if any, is pulled up to inner
+//!    nodes (G10 §5).
+//! 3. The cut is refined from the root in order of projected voxel size,
+//!    largest first, using for each node the finest requirement among the
+//!    views (G08 §4, G10 §5, L12 §4.2). A node is a leaf of the cut when it
+//!    is adequate, at the finest level, empty under the transfer function,
+//!    outside every view frustum, invisible in the last feedback, or when its
+//!    children cannot all be on the GPU this frame (data not in core, pool
+//!    full, upload budget spent).
+//! 4. The bricks the refinement wanted but did not find are requested, in
+//!    priority order; requests queued earlier and no longer wanted are
+//!    withdrawn.
+//!
+//! The returned [`FrameCut`] lists every node of the cut (for
+//! [`crate::index::SpatialIndex::build`]), the bricks to copy into GPU slots
+//! before rendering, and statistics.
+
+mod cache;
+mod feedback;
+mod geometry;
+mod io;
+mod ranges;
+
+use crate::index::{CutNode, SpatialIndex, MAX_INDEX_NODES, NO_SLOT};
+use cache::{ByteLru, SlotPool};
+use feedback::Visibility;
+use geometry::{FrameGeometry, Geometry};
+use io::{IoPool, Landed};
+use parallax_common::camera::{Placement, View};
+use parallax_common::octree::{NodeKey, OctreeDb};
+use ranges::SubtreeRanges;
+use serde::Serialize;
+use std::collections::{BinaryHeap, HashMap, HashSet, VecDeque};
+use std::sync::Arc;
+
+/// Budgets and policy of a [`Loader`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoaderConfig {
+    /// CPU level-2 cache of decoded bricks (LRU), bytes (G08 §4). Requests in
+    /// flight are limited to what it can hold.
+    pub cpu_budget_bytes: u64,
+    /// GPU brick pool capacity in slots (LRU; the slots of the current cut are
+    /// pinned) (G08 §4). At most 2^24 − 1 (the spatial index's slot field).
+    pub gpu_slots: u32,
+    /// Most bricks uploaded to the GPU per frame: a fast camera must not
+    /// stall a frame (G08 §4 "the number of updated nodes per frame is
+    /// generally small").
+    pub upload_budget: usize,
+    /// A node is adequate when one of its voxels projects to ≤ `accuracy`
+    /// display pixels (G08 §4, L12 §4.2).
+    pub accuracy: f64,
+    /// G10 §5 visibility feedback culling.
+    pub use_feedback: bool,
+    /// I/O threads (at least one is started).
+    pub io_threads: usize,
+}
+
+impl Default for LoaderConfig {
+    fn default() -> Self {
+        LoaderConfig {
+            cpu_budget_bytes: 1 << 30,
+            gpu_slots: 4096,
+            upload_budget: 64,
+            accuracy: 1.0,
+            use_feedback: true,
+            io_threads: 2,
+        }
+    }
+}
+
+/// A brick the renderer copies into a GPU slot this frame, before rendering.
+#[derive(Clone, Debug)]
+pub struct Upload {
+    pub slot: u32,
+    pub key: NodeKey,
+    /// (B+4)³ decoded values, x fastest.
+    pub data: Arc<Vec<f32>>,
+}
+
+/// One frame's cut.
+#[derive(Clone, Debug)]
+pub struct FrameCut {
+    /// Every node of the cut: inner nodes (`refined`) and leaves. Children of
+    /// a refined node that lie outside the volume are not listed (the index
+    /// makes them empty leaves).
+    pub cut: HashMap<NodeKey, CutNode>,
+    /// Bricks to copy into GPU slots before rendering this frame.
+    pub uploads: Vec<Upload>,
+    /// Reads posted this frame, highest priority first.
+    pub requests: Vec<NodeKey>,
+    pub stats: CutStats,
+}
+
+/// Figures of one frame (counters are per frame unless marked cumulative).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct CutStats {
+    /// Nodes in the cut, inner and leaves.
+    pub nodes: usize,
+    pub leaves: usize,
+    /// Leaves with a brick slot.
+    pub leaves_with_data: usize,
+    /// GPU slots in use (resident bricks, in the cut or cached).
+    pub gpu_resident: usize,
+    /// Bricks uploaded this frame.
+    pub uploaded: usize,
+    /// Reads posted this frame.
+    pub requested: usize,
+    /// Bytes in the CPU cache.
+    pub cpu_bytes: u64,
+    /// Compressed bytes read from disk since the loader started (cumulative).
+    pub bytes_read: u64,
+    /// Bricks the refinement needed on the GPU that were not there: found in
+    /// the CPU cache (hits) or not (misses).
+    pub cache_hits: u64,
+    pub cache_misses: u64,
+    /// Index nodes visible in the feedback used this frame (after pull-up).
+    pub visible: usize,
+    /// Nodes of the cut left unrefined because empty under the transfer
+    /// function, outside every view frustum, or invisible in the feedback.
+    pub culled_empty: usize,
+    pub culled_frustum: usize,
+    pub culled_invisible: usize,
+    /// Every leaf is adequate (or at the finest level, or culled): nothing is
+    /// held back by missing data or budgets.
+    pub adequate: bool,
+}
+
+/// How a node stands under this frame's transfer function.
+#[derive(Clone, Copy, Debug)]
+struct NodeClass {
+    /// The node's own stored range (what its brick holds).
+    min: f32,
+    max: f32,
+    /// Nothing in the subtree is visible under the transfer function, or the
+    /// subtree stores no brick: a leaf, never refined, no data (G08 §4).
+    culled_empty: bool,
+    /// The node's own brick is stored and not empty: it needs a GPU slot
+    /// when it is in the cut.
+    needs_data: bool,
+}
+
+/// A node of the cut waiting to be refined.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    pixels: f64,
+    seen: bool,
+    key: NodeKey,
+}
+
+impl PartialEq for Candidate {
+    fn eq(&self, o: &Self) -> bool {
+        self.cmp(o).is_eq()
+    }
+}
+impl Eq for Candidate {}
+impl PartialOrd for Candidate {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Candidate {
+    /// Largest projected voxel first; ties by key (coarse, low first) so the
+    /// order is deterministic.
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        self.pixels
+            .total_cmp(&o.pixels)
+            .then_with(|| o.key.cmp(&self.key))
+    }
+}
+
+/// The bricks one blocked refinement waits for: children already in the
+/// CPU cache and children still on disk. A refinement needs all of them in
+/// core at once, so they are kept and requested together.
+#[derive(Debug, Default)]
+struct Group {
+    cached: Vec<NodeKey>,
+    missing: Vec<NodeKey>,
+}
+
+/// What one frame's refinement accumulates.
+#[derive(Default)]
+struct Build {
+    cut: HashMap<NodeKey, CutNode>,
+    uploads: Vec<Upload>,
+    /// Blocked refinements, highest priority first.
+    wanted: Vec<Group>,
+    /// GPU slots the blocked refinements will need: not offered to
+    /// lower-priority ones.
+    reserved: usize,
+    stats: CutStats,
+}
+
+/// The adaptive loader of one back-end process: one CPU cache, one GPU pool
+/// and one cut for all of the process's views (G10 §5).
+pub struct Loader {
+    db: Arc<OctreeDb>,
+    cfg: LoaderConfig,
+    geom: Geometry,
+    ranges: SubtreeRanges,
+    l2: ByteLru,
+    gpu: SlotPool,
+    io: IoPool,
+    /// Posted and not yet landed (queued or being read): never posted twice.
+    in_flight: HashSet<NodeKey>,
+    /// Bricks the CPU cache holds (all bricks have the same size).
+    l2_bricks: usize,
+    /// Bricks whose read failed: not asked for again.
+    failed: HashSet<NodeKey>,
+    errors: Vec<String>,
+    bytes_read: u64,
+}
+
+impl Loader {
+    /// Starts the loader and its I/O threads over an open database.
+    pub fn new(db: Arc<OctreeDb>, cfg: LoaderConfig) -> Self {
+        let layout = *db.layout();
+        let geom = Geometry::new(layout, db.header.info.spacing);
+        let ranges = SubtreeRanges::new(&db);
+        let brick_bytes = (layout.stored_len() * std::mem::size_of::<f32>()) as u64;
+        let l2_bricks = (cfg.cpu_budget_bytes / brick_bytes.max(1)).min(usize::MAX as u64) as usize;
+        let slots = cfg.gpu_slots.min(NO_SLOT);
+        let io = IoPool::new(db.clone(), cfg.io_threads.max(1));
+        Loader {
+            l2: ByteLru::new(cfg.cpu_budget_bytes),
+            gpu: SlotPool::new(slots),
+            io,
+            db,
+            cfg,
+            geom,
+            ranges,
+            in_flight: HashSet::new(),
+            l2_bricks,
+            failed: HashSet::new(),
+            errors: Vec::new(),
+            bytes_read: 0,
+        }
+    }
+
+    pub fn config(&self) -> &LoaderConfig {
+        &self.cfg
+    }
+
+    pub fn db(&self) -> &Arc<OctreeDb> {
+        &self.db
+    }
+
+    /// One frame's refinement (G08 §4, G10 §5, L12 §4.2).
+    ///
+    /// Never blocks on I/O: reads and decoding run on the I/O threads, their
+    /// results are picked up here at the next call, and refinement uses only
+    /// what is resident. `empty(min, max)` says whether a value range is empty
+    /// under the current transfer function (G08 §4's summed-area table test,
+    /// e.g. [`parallax_common::tf::EmptinessTable::is_empty`]). `feedback` is
+    /// the last frame's index and its visibility words (`feedback[i] != 0`:
+    /// index node i was traversed with data), used when
+    /// [`LoaderConfig::use_feedback`] is on.
+    pub fn update(
+        &mut self,
+        views: &[View],
+        placement: &Placement,
+        empty: &dyn Fn(f32, f32) -> bool,
+        feedback: Option<(&SpatialIndex, &[u32])>,
+    ) -> FrameCut {
+        self.drain();
+        let vis = match feedback {
+            Some((index, words)) if self.cfg.use_feedback => {
+                Visibility::from_feedback(index, words)
+            }
+            _ => Visibility::none(),
+        };
+        let frame = FrameGeometry::new(&self.geom, views, placement);
+        self.gpu.begin_frame();
+        let mut b = Build::default();
+        b.stats.adequate = true;
+        b.stats.visible = vis.visible;
+
+        // The root must be resident before anything else (G08 §4: refinement
+        // starts from the root every frame).
+        let root = NodeKey::root();
+        let rc = self.classify(root, empty);
+        b.cut.insert(root, cut_node(&rc, None));
+        let mut heap = BinaryHeap::new();
+        if rc.culled_empty {
+            b.stats.culled_empty += 1;
+        } else {
+            let ready = if rc.needs_data {
+                let slot = self.root_slot(root, &mut b);
+                b.cut.get_mut(&root).unwrap().slot = slot;
+                slot.is_some()
+            } else {
+                true
+            };
+            if ready {
+                heap.push(candidate(&frame, root));
+            } else {
+                b.stats.adequate = false;
+            }
+        }
+
+        let leaf_level = self.geom.layout.leaf_level();
+        let mut index_nodes = 1usize;
+        while let Some(c) = heap.pop() {
+            let key = c.key;
+            if key.level as u32 >= leaf_level {
+                continue; // nothing finer exists
+            }
+            if !c.seen {
+                b.stats.culled_frustum += 1;
+                continue;
+            }
+            if c.pixels <= self.cfg.accuracy {
+                continue; // adequate
+            }
+            if vis.is_invisible(key) {
+                b.stats.culled_invisible += 1;
+                continue;
+            }
+            if index_nodes + 8 > MAX_INDEX_NODES {
+                // The spatial index addresses nodes with 16 bits.
+                b.stats.adequate = false;
+                continue;
+            }
+            if self.refine(key, empty, &frame, &mut b, &mut heap) {
+                index_nodes += 8;
+            } else {
+                b.stats.adequate = false;
+            }
+        }
+
+        let requests = self.post(&b.wanted);
+        let stats = &mut b.stats;
+        stats.nodes = b.cut.len();
+        stats.leaves = b.cut.values().filter(|n| !n.refined).count();
+        stats.leaves_with_data = b
+            .cut
+            .values()
+            .filter(|n| !n.refined && n.slot.is_some())
+            .count();
+        stats.gpu_resident = self.gpu.in_use();
+        stats.uploaded = b.uploads.len();
+        stats.requested = requests.len();
+        stats.cpu_bytes = self.l2.bytes();
+        stats.bytes_read = self.bytes_read;
+        FrameCut {
+            cut: b.cut,
+            uploads: b.uploads,
+            requests,
+            stats: b.stats,
+        }
+    }
+
+    /// Blocks until every posted request has landed in the CPU cache (for
+    /// tests and benchmarks that render "until converged").
+    pub fn wait_idle(&mut self) {
+        self.drain();
+        while !self.in_flight.is_empty() {
+            match self.io.recv() {
+                Ok(l) => self.land(l),
+                Err(_) => {
+                    // Every I/O thread is gone: nothing more will land.
+                    self.in_flight.clear();
+                    break;
+                }
+            }
+        }
+    }
+
+    /// A decoded brick from the CPU cache.
+    pub fn brick_data(&self, key: NodeKey) -> Option<Arc<Vec<f32>>> {
+        self.l2.peek(key).cloned()
+    }
+
+    /// The GPU slot a brick occupies, if resident.
+    pub fn gpu_slot(&self, key: NodeKey) -> Option<u32> {
+        self.gpu.slot(key)
+    }
+
+    /// Requests posted and not yet landed.
+    pub fn in_flight(&self) -> usize {
+        self.in_flight.len()
+    }
+
+    /// Read errors since the last call (a failed brick is not asked for
+    /// again; its parent stays a leaf).
+    pub fn errors(&mut self) -> Vec<String> {
+        self.drain();
+        std::mem::take(&mut self.errors)
+    }
+
+    fn drain(&mut self) {
+        while let Ok(l) = self.io.try_recv() {
+            self.land(l);
+        }
+    }
+
+    fn land(&mut self, l: Landed) {
+        self.in_flight.remove(&l.key);
+        match l.result {
+            Ok(Some(values)) => {
+                self.bytes_read += self.db.node(l.key).map_or(0, |r| r.len as u64);
+                self.l2.insert(l.key, Arc::new(values));
+            }
+            Ok(None) => {}
+            Err(e) => {
+                self.failed.insert(l.key);
+                self.errors.push(e);
+            }
+        }
+    }
+
+    fn classify(&self, key: NodeKey, empty: &dyn Fn(f32, f32) -> bool) -> NodeClass {
+        let rec = self.db.node(key);
+        let culled_empty = match self.ranges.get(key) {
+            Some((lo, hi)) => empty(lo, hi),
+            None => true,
+        };
+        let (min, max) = rec.map_or((0.0, 0.0), |r| (r.min, r.max));
+        NodeClass {
+            min,
+            max,
+            culled_empty,
+            needs_data: !culled_empty && rec.is_some_and(|r| r.is_stored() && !empty(r.min, r.max)),
+        }
+    }
+
+    /// The root's slot, uploading it from the CPU cache or requesting it.
+    fn root_slot(&mut self, root: NodeKey, b: &mut Build) -> Option<u32> {
+        if let Some(s) = self.gpu.pin(root) {
+            return Some(s);
+        }
+        if self.l2.contains(root) {
+            b.stats.cache_hits += 1;
+            if b.uploads.len() < self.cfg.upload_budget && self.gpu.available() > 0 {
+                return Some(self.upload(root, b));
+            }
+            b.wanted.push(Group {
+                cached: vec![root],
+                missing: vec![],
+            });
+        } else if !self.failed.contains(&root) {
+            b.stats.cache_misses += 1;
+            b.wanted.push(Group {
+                cached: vec![],
+                missing: vec![root],
+            });
+        }
+        None
+    }
+
+    /// Gives a brick in the CPU cache a GPU slot and lists its upload.
+    fn upload(&mut self, key: NodeKey, b: &mut Build) -> u32 {
+        let data = self.l2.get(key).expect("checked to be in the CPU cache");
+        let (slot, _evicted) = self.gpu.allocate(key).expect("checked to have a slot");
+        b.uploads.push(Upload { slot, key, data });
+        slot
+    }
+
+    /// Refines `key` if all its existing non-empty children can be on the GPU
+    /// this frame (G08 §4); otherwise posts the missing reads (unless the pool
+    /// is full) and leaves the node a leaf.
+    fn refine(
+        &mut self,
+        key: NodeKey,
+        empty: &dyn Fn(f32, f32) -> bool,
+        frame: &FrameGeometry,
+        b: &mut Build,
+        heap: &mut BinaryHeap<Candidate>,
+    ) -> bool {
+        let layout = self.geom.layout;
+        let mut kids: Vec<(NodeKey, NodeClass)> = Vec::with_capacity(8);
+        let (mut resident, mut cached, mut missing) = (0usize, Vec::new(), Vec::new());
+        for ch in key.children() {
+            if !layout.contains(ch) {
+                continue;
+            }
+            let cl = self.classify(ch, empty);
+            if cl.needs_data {
+                if self.gpu.slot(ch).is_some() {
+                    resident += 1;
+                } else if self.l2.contains(ch) {
+                    cached.push(ch);
+                } else if !self.failed.contains(&ch) {
+                    missing.push(ch);
+                } else {
+                    return false; // unreadable: this node stays a leaf
+                }
+            }
+            kids.push((ch, cl));
+        }
+        b.stats.cache_hits += cached.len() as u64;
+        b.stats.cache_misses += missing.len() as u64;
+        // Resident children are not pinned yet: they count as evictable in
+        // `available` but will be pinned, so they cannot make room; nor can
+        // the slots higher-priority blocked refinements are waiting for.
+        let need = cached.len() + missing.len();
+        if need > self.gpu.available().saturating_sub(resident + b.reserved) {
+            return false; // the GPU pool is full: not even a request
+        }
+        if !missing.is_empty() || b.uploads.len() + cached.len() > self.cfg.upload_budget {
+            // Not in core yet (never wait), or this frame's uploads are
+            // spent: keep what is cached, fetch the rest.
+            b.reserved += need;
+            b.wanted.push(Group { cached, missing });
+            return false;
+        }
+        for (ch, cl) in kids {
+            let slot = if cl.needs_data {
+                Some(match self.gpu.pin(ch) {
+                    Some(s) => s,
+                    None => self.upload(ch, b),
+                })
+            } else {
+                None
+            };
+            b.cut.insert(ch, cut_node(&cl, slot));
+            if cl.culled_empty {
+                b.stats.culled_empty += 1;
+            } else {
+                heap.push(candidate(frame, ch));
+            }
+        }
+        b.cut.get_mut(&key).unwrap().refined = true;
+        true
+    }
+
+    /// Posts this frame's reads (G08 §4: asynchronous, in priority order).
+    ///
+    /// Blocked refinements are taken highest priority first while the CPU
+    /// cache can hold, at the same time, the children each of them already has
+    /// in core, the reads it still needs, and the reads other threads are
+    /// already performing: their cached children are marked recently used and
+    /// their reads posted, so bricks landing later never evict a sibling set
+    /// before it is complete. Queued reads still wanted are reordered, those
+    /// no longer wanted are withdrawn, reads in progress are left alone.
+    /// Returns the newly posted reads.
+    fn post(&mut self, groups: &[Group]) -> Vec<NodeKey> {
+        let in_flight = &mut self.in_flight;
+        let failed = &self.failed;
+        let l2_bricks = self.l2_bricks;
+        let mut fresh = Vec::new();
+        let mut keep = Vec::new();
+        self.io.requeue(|queued| {
+            let queued: HashSet<NodeKey> = queued.into_iter().collect();
+            // Reads in progress land in the cache whoever wants them.
+            let started: HashSet<NodeKey> = in_flight
+                .iter()
+                .filter(|k| !queued.contains(k))
+                .copied()
+                .collect();
+            let mut room = l2_bricks.saturating_sub(started.len());
+            let mut accepted = HashSet::new();
+            let mut q = VecDeque::new();
+            for g in groups {
+                let need =
+                    g.cached.len() + g.missing.iter().filter(|k| !started.contains(k)).count();
+                if need > room || g.missing.iter().any(|k| failed.contains(k)) {
+                    continue;
+                }
+                room -= need;
+                keep.extend_from_slice(&g.cached);
+                for &k in &g.missing {
+                    accepted.insert(k);
+                    if queued.contains(&k) {
+                        q.push_back(k);
+                    } else if !in_flight.contains(&k) {
+                        in_flight.insert(k);
+                        fresh.push(k);
+                        q.push_back(k);
+                    }
+                }
+            }
+            for k in &queued {
+                if !accepted.contains(k) {
+                    in_flight.remove(k);
+                }
+            }
+            q
+        });
+        for k in keep {
+            self.l2.touch(k);
+        }
+        fresh
+    }
+}
+
+fn cut_node(c: &NodeClass, slot: Option<u32>) -> CutNode {
+    CutNode {
+        refined: false,
+        slot,
+        min: c.min,
+        max: c.max,
+    }
+}
+
+fn candidate(frame: &FrameGeometry, key: NodeKey) -> Candidate {
+    let a = frame.assess(key);
+    Candidate {
+        pixels: a.pixels,
+        seen: a.seen,
+        key,
+    }
+}

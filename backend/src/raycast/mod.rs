@@ -1,0 +1,426 @@
+//! The GPU ray caster (`shaders/raycast.wgsl`): renders every view of a frame
+//! in one dispatch over one brick pool, one spatial index and one visibility
+//! feedback buffer, zeroed once per frame for all views (G10 §5).
+
+pub mod params;
+pub mod pool;
+
+use crate::gpu::Gpu;
+use crate::index::SpatialIndex;
+use anyhow::{bail, Result};
+use parallax_common::camera::{Placement, View};
+use parallax_common::octree::OctreeLayout;
+use parallax_common::tf::{PreintLayout, PreintTable};
+use params::{GpuFrame, GpuView};
+pub use pool::BrickPool;
+use std::collections::HashMap;
+use wgpu::util::DeviceExt;
+
+pub const SHADER: &str = include_str!("../../../shaders/raycast.wgsl");
+
+/// The pre-integration table on the GPU (G10 §4 Eq. 2).
+pub struct TfTable {
+    buffer: wgpu::Buffer,
+    layout: PreintLayout,
+}
+
+impl TfTable {
+    pub fn new(gpu: &Gpu, table: &PreintTable) -> Self {
+        let (data, layout) = table.gpu_layout();
+        let buffer = gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("pre-integration table"),
+                contents: bytemuck::cast_slice(&data),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+        TfTable { buffer, layout }
+    }
+}
+
+/// Quality knobs of the ray caster.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Step length as a fraction of the leaf's voxel size.
+    pub step_factor: f32,
+    /// Rays stop once their opacity reaches this.
+    pub early_termination: f32,
+    /// Phong shading from central-difference gradients.
+    pub shading: bool,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            step_factor: 0.5,
+            early_termination: 0.99,
+            shading: false,
+        }
+    }
+}
+
+/// Where the volume is and how its octree is shaped.
+#[derive(Clone, Copy, Debug)]
+pub struct SceneGeometry {
+    pub placement: Placement,
+    pub layout: OctreeLayout,
+    pub spacing: [f64; 3],
+}
+
+impl SceneGeometry {
+    pub fn extent(&self) -> [f64; 3] {
+        std::array::from_fn(|a| self.layout.dims[a] as f64 * self.spacing[a])
+    }
+}
+
+/// What one frame produced.
+pub struct Rendered {
+    /// Premultiplied RGBA per view, row 0 at the top.
+    pub images: Vec<Vec<[f32; 4]>>,
+    /// Per index node: 1 where a leaf with data was traversed.
+    pub feedback: Vec<u32>,
+    /// Wall time of the GPU work (dispatch to readback).
+    pub seconds: f64,
+}
+
+pub struct Raycaster {
+    module: wgpu::ShaderModule,
+    bind_layout: wgpu::BindGroupLayout,
+    pipeline_layout: wgpu::PipelineLayout,
+    /// One pipeline per active combination of options (G10 §5: a kernel
+    /// specialised for what the scene uses).
+    pipelines: HashMap<bool, wgpu::ComputePipeline>,
+}
+
+fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+impl Raycaster {
+    pub fn new(gpu: &Gpu) -> Result<Self> {
+        let module = gpu.validated("shaders/raycast.wgsl", || {
+            gpu.device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("raycast.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+                })
+        })?;
+        let bind_layout = gpu
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("raycast"),
+                entries: &[
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 0,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Uniform,
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                        count: None,
+                    },
+                    storage(1, true),
+                    storage(2, true),
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 3,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Texture {
+                            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                            view_dimension: wgpu::TextureViewDimension::D3,
+                            multisampled: false,
+                        },
+                        count: None,
+                    },
+                    storage(4, true),
+                    storage(5, true),
+                    storage(6, false),
+                    storage(7, false),
+                ],
+            });
+        let pipeline_layout = gpu
+            .device
+            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("raycast"),
+                bind_group_layouts: &[Some(&bind_layout)],
+                immediate_size: 0,
+            });
+        Ok(Raycaster {
+            module,
+            bind_layout,
+            pipeline_layout,
+            pipelines: HashMap::new(),
+        })
+    }
+
+    fn pipeline(&mut self, gpu: &Gpu, shading: bool) -> Result<&wgpu::ComputePipeline> {
+        if !self.pipelines.contains_key(&shading) {
+            let constants = [("SHADING", if shading { 1.0 } else { 0.0 })];
+            let p = gpu.validated("ray casting pipeline", || {
+                gpu.device
+                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some("raycast"),
+                        layout: Some(&self.pipeline_layout),
+                        module: &self.module,
+                        entry_point: Some("main"),
+                        compilation_options: wgpu::PipelineCompilationOptions {
+                            constants: &constants,
+                            ..Default::default()
+                        },
+                        cache: None,
+                    })
+            })?;
+            self.pipelines.insert(shading, p);
+        }
+        Ok(&self.pipelines[&shading])
+    }
+
+    /// Renders all `views` of a frame.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render(
+        &mut self,
+        gpu: &Gpu,
+        pool: &BrickPool,
+        index: &SpatialIndex,
+        tf: &TfTable,
+        scene: &SceneGeometry,
+        views: &[View],
+        settings: &RenderSettings,
+    ) -> Result<Rendered> {
+        let start = std::time::Instant::now();
+        if index.is_empty() {
+            bail!("render: empty spatial index");
+        }
+        let mut gviews = Vec::with_capacity(views.len());
+        let mut pixels = 0u32;
+        for v in views {
+            let [w, h] = v.resolution;
+            gviews.push(GpuView {
+                region: v.region.map(|x| x as f32),
+                eye: [
+                    v.eye[0] as f32,
+                    v.eye[1] as f32,
+                    v.eye[2] as f32,
+                    v.eta as f32,
+                ],
+                observer: [
+                    v.observer[0] as f32,
+                    v.observer[1] as f32,
+                    v.observer[2] as f32,
+                    0.0,
+                ],
+                size: [w, h, pixels, 0],
+            });
+            pixels += w * h;
+        }
+        let mut images: Vec<Vec<[f32; 4]>> = views.iter().map(|_| Vec::new()).collect();
+        if pixels == 0 {
+            return Ok(Rendered {
+                images,
+                feedback: vec![0; index.len()],
+                seconds: 0.0,
+            });
+        }
+        let frame = self.frame_uniform(pool, tf, scene, settings);
+        let dev = &gpu.device;
+        let init = |label, contents: &[u8], usage| {
+            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage,
+            })
+        };
+        let frame_buf = init(
+            "frame",
+            bytemuck::bytes_of(&frame),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let view_buf = init(
+            "views",
+            bytemuck::cast_slice(&gviews),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let index_buf = init(
+            "spatial index",
+            bytemuck::cast_slice(&index.nodes),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let fb_size = index.len() as u64 * 4;
+        let feedback_buf = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("visibility feedback"),
+            size: fb_size,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let img_size = pixels as u64 * 16;
+        if img_size > dev.limits().max_storage_buffer_binding_size as u64 {
+            bail!("render: {pixels} pixels in one frame exceed the GPU's storage binding limit");
+        }
+        let image_buf = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("image"),
+            size: img_size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let readback = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: img_size + fb_size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("raycast"),
+            layout: &self.bind_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: frame_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: view_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: index_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&pool.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: pool.ranges.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: tf.buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: feedback_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: image_buf.as_entire_binding(),
+                },
+            ],
+        });
+        let max_w = views.iter().map(|v| v.resolution[0]).max().unwrap_or(0);
+        let max_h = views.iter().map(|v| v.resolution[1]).max().unwrap_or(0);
+        let pipeline = self.pipeline(gpu, settings.shading)?.clone();
+        let mut enc = dev.create_command_encoder(&Default::default());
+        // One zeroing per frame for all views (G10 §5).
+        enc.clear_buffer(&feedback_buf, 0, None);
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(max_w.div_ceil(8), max_h.div_ceil(8), views.len() as u32);
+        }
+        enc.copy_buffer_to_buffer(&image_buf, 0, &readback, 0, img_size);
+        enc.copy_buffer_to_buffer(&feedback_buf, 0, &readback, img_size, fb_size);
+        gpu.queue.submit([enc.finish()]);
+        let slice = readback.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        gpu.wait()?;
+        rx.recv()??;
+        {
+            let data = slice
+                .get_mapped_range()
+                .map_err(|e| anyhow::anyhow!("reading back the frame: {e:?}"))?;
+            let px: &[[f32; 4]] = bytemuck::cast_slice(&data[..img_size as usize]);
+            for (img, v) in images.iter_mut().zip(&gviews) {
+                let (off, n) = (v.size[2] as usize, (v.size[0] * v.size[1]) as usize);
+                *img = px[off..off + n].to_vec();
+            }
+            let feedback = bytemuck::cast_slice(&data[img_size as usize..]).to_vec();
+            drop(data);
+            readback.unmap();
+            Ok(Rendered {
+                images,
+                feedback,
+                seconds: start.elapsed().as_secs_f64(),
+            })
+        }
+    }
+
+    fn frame_uniform(
+        &self,
+        pool: &BrickPool,
+        tf: &TfTable,
+        scene: &SceneGeometry,
+        s: &RenderSettings,
+    ) -> GpuFrame {
+        let ext = scene.extent();
+        let pl = &scene.placement;
+        let rt = pl.rotation().transpose();
+        let col = |c: glam::DVec3| [c.x as f32, c.y as f32, c.z as f32, 0.0];
+        let l = &scene.layout;
+        let root = (l.brick << l.leaf_level()) as f64;
+        let sp = scene.spacing;
+        let mut tf_offsets = [[0u32; 4]; 8];
+        for (k, &o) in tf.layout.level_offsets.iter().enumerate() {
+            tf_offsets[k / 4][k % 4] = o;
+        }
+        GpuFrame {
+            rt0: col(rt.x_axis),
+            rt1: col(rt.y_axis),
+            rt2: col(rt.z_axis),
+            center: [
+                pl.center[0] as f32,
+                pl.center[1] as f32,
+                pl.center[2] as f32,
+                (1.0 / pl.scale(ext)) as f32,
+            ],
+            extent: [ext[0] as f32, ext[1] as f32, ext[2] as f32, 0.0],
+            domain: [
+                (root * sp[0]) as f32,
+                (root * sp[1]) as f32,
+                (root * sp[2]) as f32,
+                0.0,
+            ],
+            spacing: [
+                sp[0] as f32,
+                sp[1] as f32,
+                sp[2] as f32,
+                sp.iter().cloned().fold(f64::INFINITY, f64::min) as f32,
+            ],
+            tf: [
+                tf.layout.vmin as f32,
+                tf.layout.bin_width as f32,
+                tf.layout.n_bins as f32,
+                0.0,
+            ],
+            render: [
+                s.step_factor,
+                s.early_termination,
+                (0.01 / root) as f32,
+                0.0,
+            ],
+            light: [0.35, 0.65, 0.25, 24.0],
+            counts: [
+                l.brick as u32,
+                l.leaf_level(),
+                tf.layout.levels,
+                tf.layout.channel_stride,
+            ],
+            pool: [pool.grid[0], pool.grid[1], pool.grid[2], pool.side],
+            tf_offsets,
+        }
+    }
+}

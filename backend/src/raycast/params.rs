@@ -1,0 +1,45 @@
+//! Structs shared with `shaders/raycast.wgsl`: same field order and sizes.
+
+use bytemuck::{Pod, Zeroable};
+
+/// WGSL `GpuView`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuView {
+    /// x0, y0, w, h (m) on the screen plane.
+    pub region: [f32; 4],
+    /// E (m); w = η.
+    pub eye: [f32; 4],
+    /// V (m).
+    pub observer: [f32; 4],
+    /// W, H, first pixel in the output, 0.
+    pub size: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<GpuView>() == 64);
+
+/// WGSL `GpuFrame`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuFrame {
+    pub rt0: [f32; 4],
+    pub rt1: [f32; 4],
+    pub rt2: [f32; 4],
+    /// placement centre (m); w = data units per metre.
+    pub center: [f32; 4],
+    pub extent: [f32; 4],
+    pub domain: [f32; 4],
+    /// s; w = min(s).
+    pub spacing: [f32; 4],
+    /// table vmin, bin width, bins.
+    pub tf: [f32; 4],
+    /// step factor, early-termination opacity, probe offset (root units).
+    pub render: [f32; 4],
+    /// Phong ka, kd, ks, shininess.
+    pub light: [f32; 4],
+    /// B, leaf level L, table levels, table channel stride.
+    pub counts: [u32; 4],
+    /// slots per axis x, y, z; stored brick side.
+    pub pool: [u32; 4],
+    pub tf_offsets: [[u32; 4]; 8],
+}
+const _: () = assert!(std::mem::size_of::<GpuFrame>() == 320);

@@ -1,0 +1,443 @@
+//! Scene and display files (DESIGN.md "Command line", "Display
+//! configuration"). Every error names the file and the field.
+
+use crate::camera::{Placement, View};
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+fn read_toml<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.to_string().trim_end()))
+}
+
+fn resolve(base: &Path, p: &Path) -> PathBuf {
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        base.parent().unwrap_or(Path::new(".")).join(p)
+    }
+}
+
+fn finite(file: &Path, field: &str, v: &[f64]) -> Result<()> {
+    if v.iter().any(|x| !x.is_finite()) {
+        bail!("{}: {field} must be finite (got {v:?})", file.display());
+    }
+    Ok(())
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Shading {
+    None,
+    Phong,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    Dvr,
+    Mimda,
+    Iso,
+}
+
+/// `[render]` of a scene.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderConfig {
+    #[serde(default)]
+    pub eta: f64,
+    #[serde(default = "default_shading")]
+    pub shading: Shading,
+    #[serde(default = "default_mode")]
+    pub mode: Mode,
+    #[serde(default)]
+    pub gamma: f64,
+    /// Voxels per display pixel: a node is adequate when one of its voxels
+    /// projects to at most this many pixels.
+    #[serde(default = "one")]
+    pub accuracy: f64,
+    /// Step length as a fraction of the leaf's voxel size.
+    #[serde(default = "half")]
+    pub step_factor: f64,
+    /// Opacity at which rays stop.
+    #[serde(default = "early")]
+    pub early_termination: f64,
+    /// CPU (L2) brick cache, MiB.
+    #[serde(default = "cpu_mb")]
+    pub cpu_cache_mb: f64,
+    /// GPU brick pool, MiB.
+    #[serde(default = "gpu_mb")]
+    pub gpu_cache_mb: f64,
+    /// Bricks uploaded to the GPU per frame at most.
+    #[serde(default = "uploads")]
+    pub upload_budget: usize,
+    /// Visibility feedback culling (G10 §5).
+    #[serde(default = "yes")]
+    pub visibility_feedback: bool,
+}
+
+fn default_shading() -> Shading {
+    Shading::None
+}
+fn default_mode() -> Mode {
+    Mode::Dvr
+}
+fn one() -> f64 {
+    1.0
+}
+fn half() -> f64 {
+    0.5
+}
+fn early() -> f64 {
+    0.99
+}
+fn cpu_mb() -> f64 {
+    1024.0
+}
+fn gpu_mb() -> f64 {
+    512.0
+}
+fn uploads() -> usize {
+    256
+}
+fn yes() -> bool {
+    true
+}
+
+impl Default for RenderConfig {
+    fn default() -> Self {
+        toml::from_str("").unwrap()
+    }
+}
+
+/// A scene file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// The octree database (relative to the scene file).
+    pub volume: PathBuf,
+    /// The transfer function file (relative to the scene file).
+    pub transfer_function: PathBuf,
+    pub placement: Placement,
+    #[serde(default)]
+    pub render: RenderConfig,
+    /// The display to render for when none is given on the command line.
+    #[serde(default)]
+    pub display: Option<PathBuf>,
+}
+
+impl Scene {
+    pub fn load(path: &Path) -> Result<Self> {
+        let mut s: Scene = read_toml(path)?;
+        let f = path;
+        s.volume = resolve(path, &s.volume);
+        s.transfer_function = resolve(path, &s.transfer_function);
+        s.display = s.display.map(|d| resolve(path, &d));
+        finite(f, "placement.center", &s.placement.center)?;
+        finite(f, "placement.rotation_deg", &s.placement.rotation_deg)?;
+        let r = &s.render;
+        if !(s.placement.size.is_finite() && s.placement.size > 0.0) {
+            bail!(
+                "{}: placement.size must be > 0 (got {})",
+                f.display(),
+                s.placement.size
+            );
+        }
+        if !r.eta.is_finite() {
+            bail!("{}: render.eta must be finite (got {})", f.display(), r.eta);
+        }
+        if !(0.0..=1.0).contains(&r.gamma) {
+            bail!(
+                "{}: render.gamma must be in [0, 1] (got {})",
+                f.display(),
+                r.gamma
+            );
+        }
+        if !(r.accuracy.is_finite() && r.accuracy > 0.0) {
+            bail!(
+                "{}: render.accuracy must be > 0 (got {})",
+                f.display(),
+                r.accuracy
+            );
+        }
+        if !(r.step_factor.is_finite() && r.step_factor > 0.0 && r.step_factor <= 8.0) {
+            bail!(
+                "{}: render.step_factor must be in (0, 8] (got {})",
+                f.display(),
+                r.step_factor
+            );
+        }
+        if !(r.early_termination > 0.0 && r.early_termination <= 1.0) {
+            bail!(
+                "{}: render.early_termination must be in (0, 1] (got {})",
+                f.display(),
+                r.early_termination
+            );
+        }
+        for (name, v) in [
+            ("render.cpu_cache_mb", r.cpu_cache_mb),
+            ("render.gpu_cache_mb", r.gpu_cache_mb),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                bail!("{}: {name} must be ≥ 0 (got {v})", f.display());
+            }
+        }
+        if r.mode != Mode::Dvr || r.gamma != 0.0 {
+            bail!(
+                "{}: render.mode = {:?} with gamma {} is not available in this version (only \"dvr\")",
+                f.display(),
+                r.mode,
+                r.gamma
+            );
+        }
+        Ok(s)
+    }
+}
+
+/// `[screen]` of a display.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Screen {
+    /// Width and height (m), centred on the origin.
+    pub size: [f64; 2],
+    /// s0 (m).
+    pub pixel_size: f64,
+    /// Φ (degrees).
+    #[serde(default)]
+    pub angular_accuracy_deg: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Observer {
+    pub position: [f64; 3],
+    /// The projector list may also stand here: in TOML, a `projectors = …`
+    /// line written after `[observer]` belongs to that table (as in the
+    /// DESIGN.md example).
+    #[serde(default, skip_serializing)]
+    pub projectors: Option<ProjectorList>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ProjectorList {
+    Folder(PathBuf),
+    Files(Vec<PathBuf>),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DisplayFile {
+    screen: Screen,
+    observer: Observer,
+    #[serde(default)]
+    projectors: Option<ProjectorList>,
+}
+
+/// One projector (or a window).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Projector {
+    pub id: String,
+    /// E (m).
+    pub position: [f64; 3],
+    pub resolution: [u32; 2],
+    /// [x0, y0, w, h] (m); default: the whole screen.
+    #[serde(default)]
+    pub region: Option<[f64; 4]>,
+    /// The back-end rank that drives it (default: contiguous blocks).
+    #[serde(default)]
+    pub rank: Option<u32>,
+}
+
+/// A display: screen, observer and projectors.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Display {
+    pub screen: Screen,
+    pub observer: Observer,
+    pub projectors: Vec<Projector>,
+}
+
+impl Display {
+    pub fn load(path: &Path) -> Result<Self> {
+        let mut d: DisplayFile = read_toml(path)?;
+        let f = path.display();
+        let list = match (d.projectors.take(), d.observer.projectors.take()) {
+            (Some(l), None) | (None, Some(l)) => l,
+            (None, None) => {
+                bail!("{f}: projectors: missing (a folder or a list of projector files)")
+            }
+            (Some(_), Some(_)) => bail!("{f}: projectors: given twice"),
+        };
+        let s = d.screen;
+        if !(s.size.iter().all(|x| x.is_finite() && *x > 0.0)) {
+            bail!(
+                "{f}: screen.size must be two positive lengths (got {:?})",
+                s.size
+            );
+        }
+        if !(s.pixel_size.is_finite() && s.pixel_size > 0.0) {
+            bail!("{f}: screen.pixel_size must be > 0 (got {})", s.pixel_size);
+        }
+        if !(0.0..90.0).contains(&s.angular_accuracy_deg) {
+            bail!(
+                "{f}: screen.angular_accuracy_deg must be in [0, 90) (got {})",
+                s.angular_accuracy_deg
+            );
+        }
+        finite(path, "observer.position", &d.observer.position)?;
+        if d.observer.position[2].abs() < 1e-9 {
+            bail!("{f}: observer.position must be off the screen plane (z ≠ 0)");
+        }
+        let files: Vec<PathBuf> = match &list {
+            ProjectorList::Folder(dir) => {
+                let dir = resolve(path, dir);
+                let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+                    .with_context(|| {
+                        format!("{f}: projectors: cannot read folder {}", dir.display())
+                    })?
+                    .filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+                    .collect();
+                v.sort();
+                v
+            }
+            ProjectorList::Files(list) => list.iter().map(|p| resolve(path, p)).collect(),
+        };
+        if files.is_empty() {
+            bail!("{f}: projectors: no projector files");
+        }
+        let mut projectors = Vec::with_capacity(files.len());
+        for pf in &files {
+            let p: Projector = read_toml(pf)?;
+            let pn = pf.display();
+            finite(pf, "position", &p.position)?;
+            if p.position[2].abs() < 1e-9 {
+                bail!("{pn}: position: a projector on the screen plane (z = 0) has no rays through the screen");
+            }
+            if p.resolution.contains(&0) {
+                bail!(
+                    "{pn}: resolution must be at least 1×1 (got {:?})",
+                    p.resolution
+                );
+            }
+            if let Some(r) = p.region {
+                finite(pf, "region", &r)?;
+                if r[2] <= 0.0 || r[3] <= 0.0 {
+                    bail!("{pn}: region width and height must be > 0 (got {r:?})");
+                }
+            }
+            if let Some(q) = projectors.iter().find(|q: &&Projector| q.id == p.id) {
+                bail!(
+                    "{pn}: id '{}' is used by another projector too ({})",
+                    p.id,
+                    q.id
+                );
+            }
+            projectors.push(p);
+        }
+        Ok(Display {
+            screen: s,
+            observer: d.observer,
+            projectors,
+        })
+    }
+
+    /// The view of each projector for a given η.
+    pub fn views(&self, eta: f64) -> Vec<View> {
+        let [sw, sh] = self.screen.size;
+        self.projectors
+            .iter()
+            .map(|p| View {
+                resolution: p.resolution,
+                region: p.region.unwrap_or([-sw / 2.0, -sh / 2.0, sw, sh]),
+                eye: p.position,
+                observer: self.observer.position,
+                eta,
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+        let p = dir.join(name);
+        if let Some(parent) = p.parent() {
+            std::fs::create_dir_all(parent).unwrap();
+        }
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    const DISPLAY: &str = "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.001\n[observer]\nposition = [0, 0, 1]\nprojectors = \"p/\"\n";
+
+    #[test]
+    fn display_and_scene_load() {
+        let d = tempfile::tempdir().unwrap();
+        let disp = write(d.path(), "d.toml", DISPLAY);
+        write(
+            d.path(),
+            "p/a.toml",
+            "id = \"a\"\nposition = [0, 0, 1]\nresolution = [64, 48]\n",
+        );
+        let display = Display::load(&disp).unwrap();
+        assert_eq!(display.projectors.len(), 1);
+        let v = display.views(0.0);
+        assert_eq!(v[0].region, [-0.2, -0.15, 0.4, 0.3]);
+        let scene = write(
+            d.path(),
+            "s.toml",
+            "volume = \"v.pxo\"\ntransfer_function = \"tf.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\n[render]\nshading = \"phong\"\n",
+        );
+        let s = Scene::load(&scene).unwrap();
+        assert_eq!(s.volume, d.path().join("v.pxo"));
+        assert_eq!(s.render.shading, Shading::Phong);
+        assert_eq!(s.render.accuracy, 1.0);
+    }
+
+    #[test]
+    fn bad_files_name_file_and_field() {
+        let d = tempfile::tempdir().unwrap();
+        let cases = [
+            ("[placement]\ncenter = [0, 0, 0]\nsize = 0.2\n", "volume"),
+            ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = -1\n", "placement.size"),
+            ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = 1\n[render]\naccuracy = 0\n", "render.accuracy"),
+            ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = 1\n[render]\nstepfactor = 1\n", "stepfactor"),
+            ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, nan, 0]\nsize = 1\n", "placement.center"),
+        ];
+        for (text, field) in cases {
+            let p = write(d.path(), "bad.toml", text);
+            let e = format!("{:#}", Scene::load(&p).unwrap_err());
+            assert!(e.contains("bad.toml") && e.contains(field), "{e}");
+        }
+        let disp = write(d.path(), "d.toml", DISPLAY);
+        write(
+            d.path(),
+            "p/a.toml",
+            "id = \"a\"\nposition = [0, 0, 0]\nresolution = [64, 48]\n",
+        );
+        let e = format!("{:#}", Display::load(&disp).unwrap_err());
+        assert!(e.contains("a.toml") && e.contains("position"), "{e}");
+        write(
+            d.path(),
+            "p/a.toml",
+            "id = \"a\"\nposition = [0, 0, 1]\nresolution = [64, 48]\n",
+        );
+        write(
+            d.path(),
+            "p/b.toml",
+            "id = \"a\"\nposition = [0, 0, 1]\nresolution = [64, 48]\n",
+        );
+        let e = format!("{:#}", Display::load(&disp).unwrap_err());
+        assert!(e.contains("b.toml") && e.contains("id"), "{e}");
+        std::fs::remove_dir_all(d.path().join("p")).unwrap();
+        let e = format!("{:#}", Display::load(&disp).unwrap_err());
+        assert!(e.contains("d.toml") && e.contains("projectors"), "{e}");
+    }
+}

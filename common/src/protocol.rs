@@ -1,0 +1,255 @@
+//! What the front end and the back ends say to each other (DESIGN.md
+//! "Process model"): small per-frame state broadcast to every back end, a
+//! stats reply from each, and the large state (scene, display, transfer
+//! function) sent once and again only when it changes. Messages travel as
+//! bincode bytes over a [`Transport`]: an in-process channel, or MPI.
+
+use crate::camera::Placement;
+use crate::config::{Display, RenderConfig, Scene};
+use crate::tf::TransferFunction;
+use anyhow::{Context, Result};
+use serde::{Deserialize, Serialize};
+use std::sync::mpsc;
+
+/// The per-frame state every back end renders frame `frame` from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameState {
+    pub frame: u64,
+    pub placement: Placement,
+    pub observer: [f64; 3],
+    pub eta: f64,
+    pub render: RenderConfig,
+    /// Which transfer function (sent earlier) to use.
+    pub tf_version: u64,
+}
+
+/// Large state, sent once and again only when it changes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum ToBackend {
+    Setup {
+        scene: Scene,
+        display: Display,
+        /// Where to write images and the float output flag.
+        out_dir: Option<std::path::PathBuf>,
+        float: bool,
+    },
+    TransferFunction {
+        version: u64,
+        tf: TransferFunction,
+    },
+    Frame(FrameState),
+    Quit,
+}
+
+/// What a back end reports after each frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FrameStats {
+    pub rank: u32,
+    pub frame: u64,
+    pub views: u32,
+    /// Stage times, milliseconds.
+    pub refine_ms: f64,
+    pub upload_ms: f64,
+    pub index_ms: f64,
+    pub render_ms: f64,
+    pub output_ms: f64,
+    pub total_ms: f64,
+    /// Bricks: nodes in the cut, leaves with data, resident in the GPU pool,
+    /// uploaded this frame, marked visible by the last feedback.
+    pub cut_nodes: u64,
+    pub cut_leaves_with_data: u64,
+    pub resident: u64,
+    pub uploaded: u64,
+    pub visible: u64,
+    pub requested: u64,
+    pub cache_hits: u64,
+    pub cache_misses: u64,
+    /// Bytes read from the database so far.
+    pub bytes_read: u64,
+    /// Every leaf of the cut is adequate (the image has converged).
+    pub adequate: bool,
+    /// An error that ended this back end, if any.
+    pub error: Option<String>,
+}
+
+/// The bincode configuration of every message.
+pub fn config() -> impl bincode::config::Config {
+    bincode::config::standard()
+}
+
+pub fn encode<T: Serialize>(msg: &T) -> Vec<u8> {
+    bincode::serde::encode_to_vec(msg, config()).expect("protocol messages always encode")
+}
+
+pub fn decode<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T> {
+    let (v, _) =
+        bincode::serde::decode_from_slice(bytes, config()).context("malformed protocol message")?;
+    Ok(v)
+}
+
+/// The front end's side: broadcast to all back ends, gather their replies.
+pub trait Transport {
+    /// Number of back ends.
+    fn backends(&self) -> usize;
+    fn broadcast(&mut self, msg: &ToBackend) -> Result<()>;
+    /// One reply from every back end (swap lock: returns once all finished).
+    fn gather(&mut self) -> Result<Vec<FrameStats>>;
+}
+
+/// A back end's side.
+pub trait Link {
+    fn rank(&self) -> u32;
+    fn receive(&mut self) -> Result<ToBackend>;
+    fn reply(&mut self, stats: &FrameStats) -> Result<()>;
+}
+
+/// In-process transport: the embedded mode runs the back ends as threads and
+/// passes the same bincode bytes over channels.
+pub struct ChannelTransport {
+    to: Vec<mpsc::Sender<Vec<u8>>>,
+    from: mpsc::Receiver<Vec<u8>>,
+}
+
+pub struct ChannelLink {
+    rank: u32,
+    from: mpsc::Receiver<Vec<u8>>,
+    to: mpsc::Sender<Vec<u8>>,
+}
+
+/// A front-end transport and `n` back-end links (ranks 1..=n).
+pub fn channels(n: usize) -> (ChannelTransport, Vec<ChannelLink>) {
+    let (reply_tx, reply_rx) = mpsc::channel();
+    let mut to = Vec::new();
+    let mut links = Vec::new();
+    for r in 0..n {
+        let (tx, rx) = mpsc::channel();
+        to.push(tx);
+        links.push(ChannelLink {
+            rank: r as u32 + 1,
+            from: rx,
+            to: reply_tx.clone(),
+        });
+    }
+    (ChannelTransport { to, from: reply_rx }, links)
+}
+
+impl Transport for ChannelTransport {
+    fn backends(&self) -> usize {
+        self.to.len()
+    }
+
+    fn broadcast(&mut self, msg: &ToBackend) -> Result<()> {
+        let bytes = encode(msg);
+        for (i, t) in self.to.iter().enumerate() {
+            t.send(bytes.clone())
+                .map_err(|_| anyhow::anyhow!("back end {} has stopped", i + 1))?;
+        }
+        Ok(())
+    }
+
+    fn gather(&mut self) -> Result<Vec<FrameStats>> {
+        let mut out = Vec::with_capacity(self.to.len());
+        for _ in 0..self.to.len() {
+            let bytes = self
+                .from
+                .recv()
+                .map_err(|_| anyhow::anyhow!("a back end stopped without replying"))?;
+            out.push(decode::<FrameStats>(&bytes)?);
+        }
+        out.sort_by_key(|s| s.rank);
+        Ok(out)
+    }
+}
+
+impl Link for ChannelLink {
+    fn rank(&self) -> u32 {
+        self.rank
+    }
+
+    fn receive(&mut self) -> Result<ToBackend> {
+        let bytes = self
+            .from
+            .recv()
+            .map_err(|_| anyhow::anyhow!("the front end has stopped"))?;
+        decode(&bytes)
+    }
+
+    fn reply(&mut self, stats: &FrameStats) -> Result<()> {
+        self.to
+            .send(encode(stats))
+            .map_err(|_| anyhow::anyhow!("the front end has stopped"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_state_round_trips_and_is_small() {
+        let s = FrameState {
+            frame: 12,
+            placement: Placement {
+                center: [0.0, 0.1, 0.0],
+                rotation_deg: [0.0, 45.0, 0.0],
+                size: 0.3,
+            },
+            observer: [0.0, 0.0, 2.0],
+            eta: 1.0,
+            render: RenderConfig::default(),
+            tf_version: 1,
+        };
+        let msg = ToBackend::Frame(s.clone());
+        let b = encode(&msg);
+        assert!(b.len() < 256, "{} bytes", b.len());
+        assert_eq!(decode::<ToBackend>(&b).unwrap(), msg);
+        assert!(decode::<ToBackend>(&b[..b.len() / 2]).is_err());
+    }
+
+    #[test]
+    fn channels_broadcast_and_gather() {
+        let (mut t, links) = channels(3);
+        let handles: Vec<_> = links
+            .into_iter()
+            .map(|mut l| {
+                std::thread::spawn(move || {
+                    while let Ok(m) = l.receive() {
+                        match m {
+                            ToBackend::Quit => break,
+                            ToBackend::Frame(f) => l
+                                .reply(&FrameStats {
+                                    rank: l.rank(),
+                                    frame: f.frame,
+                                    ..Default::default()
+                                })
+                                .unwrap(),
+                            _ => {}
+                        }
+                    }
+                })
+            })
+            .collect();
+        let f = FrameState {
+            frame: 7,
+            placement: Placement {
+                center: [0.0; 3],
+                rotation_deg: [0.0; 3],
+                size: 1.0,
+            },
+            observer: [0.0, 0.0, 1.0],
+            eta: 0.0,
+            render: RenderConfig::default(),
+            tf_version: 0,
+        };
+        t.broadcast(&ToBackend::Frame(f)).unwrap();
+        let stats = t.gather().unwrap();
+        assert_eq!(
+            stats.iter().map(|s| (s.rank, s.frame)).collect::<Vec<_>>(),
+            vec![(1, 7), (2, 7), (3, 7)]
+        );
+        t.broadcast(&ToBackend::Quit).unwrap();
+        for h in handles {
+            h.join().unwrap();
+        }
+    }
+}
