@@ -68,6 +68,30 @@ enum Command {
         #[arg(long)]
         big_endian: bool,
     },
+    /// Render a scene's display: PNG per projector (and .npy with --float),
+    /// stats.jsonl per frame.
+    Render {
+        #[arg(long)]
+        scene: PathBuf,
+        /// Display file (default: the scene's `display`).
+        #[arg(long)]
+        display: Option<PathBuf>,
+        #[arg(long, default_value_t = 1)]
+        frames: u64,
+        /// Output folder: DIR/frame_NNNNN/<projector>.png, DIR/stats.jsonl
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Also write float32 .npy images (linear, premultiplied).
+        #[arg(long)]
+        float: bool,
+        /// Wait for every posted brick read before each frame (reproducible
+        /// frames; otherwise the loader never blocks).
+        #[arg(long)]
+        sync: bool,
+        /// Back-end threads in the embedded (single-process) mode.
+        #[arg(long, default_value_t = 1)]
+        backends: usize,
+    },
     /// Describe a database; --verify decodes and checks every brick.
     Info {
         database: PathBuf,
@@ -158,6 +182,29 @@ fn run(cli: Cli) -> Result<()> {
                 println!("peak resident memory: {:.1} MiB", kb as f64 / 1024.0);
             }
         }
+        Command::Render {
+            scene,
+            display,
+            frames,
+            out,
+            float,
+            sync,
+            backends,
+        } => {
+            let opts = parallax_frontend::RunOptions {
+                scene,
+                display,
+                frames,
+                out: out.clone(),
+                float,
+                sync_io: sync,
+                verbose: true,
+            };
+            render_embedded(&opts, backends)?;
+            if let Some(o) = out {
+                println!("images and stats.jsonl in {}", o.display());
+            }
+        }
         Command::Info { database, verify } => {
             let db = OctreeDb::open(&database)?;
             print!("{}", info::describe(&db));
@@ -171,6 +218,41 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The embedded mode: the front end on this thread, the back ends on
+/// threads of their own, talking through the same protocol as over MPI.
+fn render_embedded(opts: &parallax_frontend::RunOptions, backends: usize) -> Result<()> {
+    if backends == 0 {
+        bail!("--backends 0: at least one back end is needed");
+    }
+    let (mut transport, links) = parallax_common::protocol::channels(backends);
+    let threads: Vec<_> = links
+        .into_iter()
+        .map(|mut link| {
+            std::thread::spawn(move || parallax_backend::node::serve(&mut link, backends))
+        })
+        .collect();
+    let result = parallax_frontend::run(opts, &mut transport);
+    drop(transport);
+    let mut backend_error = None;
+    for (i, t) in threads.into_iter().enumerate() {
+        match t.join() {
+            Ok(Err(e)) => {
+                backend_error.get_or_insert(e.context(format!("back end {}", i + 1)));
+            }
+            Err(_) => {
+                backend_error.get_or_insert(anyhow::anyhow!("back end {} panicked", i + 1));
+            }
+            Ok(Ok(())) => {}
+        }
+    }
+    match (result, backend_error) {
+        (Err(e), Some(b)) => Err(e.context(format!("{b:#}"))),
+        (Err(e), None) => Err(e),
+        (Ok(_), Some(e)) => Err(e),
+        (Ok(_), None) => Ok(()),
+    }
 }
 
 fn parse_type(s: &str, flag: &str) -> Result<VoxelType> {

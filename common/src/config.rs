@@ -211,19 +211,24 @@ pub struct Screen {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct Observer {
     pub position: [f64; 3],
-    /// The projector list may also stand here: in TOML, a `projectors = …`
-    /// line written after `[observer]` belongs to that table (as in the
-    /// DESIGN.md example).
-    #[serde(default, skip_serializing)]
-    pub projectors: Option<ProjectorList>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// `[observer]` as written in a file. The projector list may also stand
+/// here: in TOML, a `projectors = …` line written after `[observer]` belongs
+/// to that table (as in the DESIGN.md example).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ObserverFile {
+    position: [f64; 3],
+    #[serde(default)]
+    projectors: Option<ProjectorList>,
+}
+
+#[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(untagged)]
-pub enum ProjectorList {
+enum ProjectorList {
     Folder(PathBuf),
     Files(Vec<PathBuf>),
 }
@@ -232,7 +237,7 @@ pub enum ProjectorList {
 #[serde(deny_unknown_fields)]
 struct DisplayFile {
     screen: Screen,
-    observer: Observer,
+    observer: ObserverFile,
     #[serde(default)]
     projectors: Option<ProjectorList>,
 }
@@ -341,9 +346,44 @@ impl Display {
         }
         Ok(Display {
             screen: s,
-            observer: d.observer,
+            observer: Observer {
+                position: d.observer.position,
+            },
             projectors,
         })
+    }
+
+    /// Which projectors each back end renders: `result[r]` lists the
+    /// projector indices of back-end rank r + 1. A projector's `rank` field
+    /// pins it; the others are dealt out in contiguous blocks.
+    pub fn assignment(&self, backends: usize) -> Result<Vec<Vec<usize>>> {
+        let p = self.projectors.len();
+        if backends == 0 {
+            bail!("no back-end ranks to render with");
+        }
+        if backends > p {
+            bail!("{backends} back-end ranks but only {p} projectors: every back end needs at least one projector");
+        }
+        let mut out = vec![Vec::new(); backends];
+        for (i, pr) in self.projectors.iter().enumerate() {
+            let r = match pr.rank {
+                Some(r) => {
+                    if r == 0 || r as usize > backends {
+                        bail!(
+                            "projector '{}': rank {r} does not exist (back-end ranks are 1..={backends})",
+                            pr.id
+                        );
+                    }
+                    r as usize - 1
+                }
+                None => i * backends / p,
+            };
+            out[r].push(i);
+        }
+        if let Some(r) = out.iter().position(|v| v.is_empty()) {
+            bail!("back-end rank {} has no projector to render", r + 1);
+        }
+        Ok(out)
     }
 
     /// The view of each projector for a given η.

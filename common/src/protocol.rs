@@ -32,6 +32,10 @@ pub enum ToBackend {
         /// Where to write images and the float output flag.
         out_dir: Option<std::path::PathBuf>,
         float: bool,
+        /// Wait for every posted brick read before refining a frame, so
+        /// that a frame depends only on the frames before it (tests and
+        /// comparisons between runs); interactive use never waits.
+        sync_io: bool,
     },
     TransferFunction {
         version: u64,
@@ -204,6 +208,45 @@ mod tests {
         assert!(b.len() < 256, "{} bytes", b.len());
         assert_eq!(decode::<ToBackend>(&b).unwrap(), msg);
         assert!(decode::<ToBackend>(&b[..b.len() / 2]).is_err());
+    }
+
+    #[test]
+    fn setup_messages_round_trip() {
+        // Everything sent once (scene, display, transfer function) goes
+        // through bincode too: no serde features it cannot encode.
+        let dir = std::env::temp_dir().join(format!("px-proto-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("p")).unwrap();
+        std::fs::write(
+            dir.join("d.toml"),
+            "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.001\n[observer]\nposition = [0, 0, 1]\nprojectors = \"p/\"\n",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("p/a.toml"),
+            "id = \"a\"\nposition = [0, 0, 1]\nresolution = [8, 8]\n",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("s.toml"),
+            "volume = \"v.pxo\"\ntransfer_function = \"t.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\n",
+        )
+        .unwrap();
+        let setup = ToBackend::Setup {
+            scene: Scene::load(&dir.join("s.toml")).unwrap(),
+            display: Display::load(&dir.join("d.toml")).unwrap(),
+            out_dir: Some(dir.clone()),
+            float: true,
+            sync_io: false,
+        };
+        assert_eq!(decode::<ToBackend>(&encode(&setup)).unwrap(), setup);
+        let tf = TransferFunction::from_toml_str(
+            "[[point]]\nvalue = 0\ncolor = [1, 0, 0]\nextinction = 0.5\n",
+            "t.toml",
+        )
+        .unwrap();
+        let m = ToBackend::TransferFunction { version: 3, tf };
+        assert_eq!(decode::<ToBackend>(&encode(&m)).unwrap(), m);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -92,7 +92,7 @@ pub struct Optics {
 /// [`TransferFunction::from_toml_str`] additionally put the file name in
 /// every error message.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "RawFile")]
+#[serde(try_from = "RawFile", into = "RawFile")]
 pub struct TransferFunction {
     #[serde(rename = "point")]
     points: Vec<ControlPoint>,
@@ -100,14 +100,14 @@ pub struct TransferFunction {
 
 /// The TOML file as written: every field optional so that validation can name
 /// what is missing, and where.
-#[derive(Deserialize)]
+#[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawFile {
     #[serde(default)]
     point: Vec<RawPoint>,
 }
 
-#[derive(Deserialize)]
+#[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPoint {
     value: Option<f64>,
@@ -115,6 +115,26 @@ struct RawPoint {
     extinction: Option<f64>,
     importance: Option<f64>,
     refraction: Option<f64>,
+}
+
+/// Serialised through the same shape it is read from, so that a transfer
+/// function written by serde (TOML, or bincode between processes) reads back.
+impl From<TransferFunction> for RawFile {
+    fn from(tf: TransferFunction) -> Self {
+        RawFile {
+            point: tf
+                .points
+                .into_iter()
+                .map(|p| RawPoint {
+                    value: Some(p.value),
+                    color: Some(p.color.to_vec()),
+                    extinction: Some(p.extinction),
+                    importance: Some(p.importance),
+                    refraction: Some(p.refraction),
+                })
+                .collect(),
+        }
+    }
 }
 
 impl TryFrom<RawFile> for TransferFunction {

@@ -1,0 +1,230 @@
+//! One back end's renderer: every frame, refine the cut for all of this
+//! process's views (one loader, one brick pool, one spatial index, one
+//! visibility feedback buffer: G10 §5), upload, build the index, ray cast.
+
+use crate::gpu::Gpu;
+use crate::index::SpatialIndex;
+use crate::loader::{Loader, LoaderConfig};
+use crate::raycast::{BrickPool, Raycaster, RenderSettings, SceneGeometry, TfTable};
+use anyhow::{bail, Context, Result};
+use parallax_common::camera::{Placement, View};
+use parallax_common::config::{RenderConfig, Shading};
+use parallax_common::octree::{BrickEncoding, OctreeDb};
+use parallax_common::protocol::FrameStats;
+use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// The transfer function as the renderer uses it.
+struct ActiveTf {
+    version: u64,
+    table: TfTable,
+    empty: EmptinessTable,
+}
+
+pub struct Renderer {
+    gpu: Gpu,
+    raycaster: Raycaster,
+    pool: BrickPool,
+    loader: Loader,
+    db: Arc<OctreeDb>,
+    tf: Option<ActiveTf>,
+    last: Option<(SpatialIndex, Vec<u32>)>,
+    /// Wait for every posted read before refining (deterministic frames).
+    pub sync_io: bool,
+}
+
+/// A rendered frame: one premultiplied RGBA image per view, and its figures.
+pub struct Frame {
+    pub images: Vec<Vec<[f32; 4]>>,
+    pub stats: FrameStats,
+}
+
+impl Renderer {
+    pub fn new(database: &Path, cfg: &RenderConfig) -> Result<Self> {
+        let db = Arc::new(OctreeDb::open(database)?);
+        let gpu = Gpu::new()?;
+        let raycaster = Raycaster::new(&gpu)?;
+        let layout = *db.layout();
+        let float = db.encoding() != BrickEncoding::U8Range;
+        let side = layout.stored_side() as u32;
+        let budget = (cfg.gpu_cache_mb * (1 << 20) as f64) as u64;
+        let slots = BrickPool::slots_for_budget(budget, side, float)
+            .min(crate::index::MAX_INDEX_NODES as u32);
+        if slots == 0 {
+            bail!(
+                "render.gpu_cache_mb = {}: too small for even the root brick ({:.2} MiB per brick)",
+                cfg.gpu_cache_mb,
+                BrickPool::slot_bytes(side, float) as f64 / (1 << 20) as f64
+            );
+        }
+        let cpu_budget = (cfg.cpu_cache_mb * (1 << 20) as f64) as u64;
+        let brick_bytes = layout.stored_len() as u64 * 4;
+        if cpu_budget < brick_bytes {
+            bail!(
+                "render.cpu_cache_mb = {}: too small for even the root brick ({:.2} MiB per brick)",
+                cfg.cpu_cache_mb,
+                brick_bytes as f64 / (1 << 20) as f64
+            );
+        }
+        let pool = BrickPool::new(&gpu, slots, side, float)?;
+        let loader = Loader::new(
+            db.clone(),
+            LoaderConfig {
+                cpu_budget_bytes: cpu_budget,
+                gpu_slots: slots,
+                upload_budget: cfg.upload_budget.max(1),
+                accuracy: cfg.accuracy,
+                use_feedback: cfg.visibility_feedback,
+                io_threads: 2,
+            },
+        );
+        Ok(Renderer {
+            gpu,
+            raycaster,
+            pool,
+            loader,
+            db,
+            tf: None,
+            last: None,
+            sync_io: false,
+        })
+    }
+
+    pub fn adapter(&self) -> &wgpu::AdapterInfo {
+        &self.gpu.info
+    }
+
+    pub fn db(&self) -> &OctreeDb {
+        &self.db
+    }
+
+    /// Installs a transfer function: pre-integration table over the
+    /// dataset's value range (G10 §4) and its emptiness table (G08 §4).
+    pub fn set_transfer_function(&mut self, version: u64, tf: &TransferFunction) -> Result<()> {
+        let s = &self.db.summary;
+        let (lo, hi) = (s.value_min as f64, s.value_max as f64);
+        let integer = self.db.header.info.voxel_type != parallax_common::volume::VoxelType::F32;
+        let bins = PreintTable::suggested_bins(lo, hi, integer);
+        let table = PreintTable::new(tf, lo, hi, bins)?;
+        let empty = EmptinessTable::new(tf, lo, hi, bins)?;
+        self.tf = Some(ActiveTf {
+            version,
+            table: TfTable::new(&self.gpu, &table),
+            empty,
+        });
+        // Last frame's visibility was for another transfer function.
+        self.last = None;
+        Ok(())
+    }
+
+    pub fn tf_version(&self) -> Option<u64> {
+        self.tf.as_ref().map(|t| t.version)
+    }
+
+    /// Renders one frame of `views`.
+    pub fn frame(
+        &mut self,
+        frame: u64,
+        placement: &Placement,
+        views: &[View],
+        cfg: &RenderConfig,
+    ) -> Result<Frame> {
+        let start = Instant::now();
+        let tf = self
+            .tf
+            .as_ref()
+            .context("render: no transfer function set")?;
+        let mut stats = FrameStats {
+            frame,
+            views: views.len() as u32,
+            ..Default::default()
+        };
+        if self.sync_io {
+            self.loader.wait_idle();
+        }
+        let t = Instant::now();
+        let empty = |lo: f32, hi: f32| tf.empty.is_empty(lo as f64, hi as f64);
+        let feedback = self.last.as_ref().map(|(i, f)| (i, f.as_slice()));
+        let cut = self.loader.update(views, placement, &empty, feedback);
+        if let Some(e) = self.loader.errors().into_iter().next() {
+            bail!("{e}");
+        }
+        stats.refine_ms = ms(t);
+
+        let t = Instant::now();
+        for u in &cut.uploads {
+            self.pool.upload(&self.gpu, u.slot, &u.data);
+        }
+        stats.upload_ms = ms(t);
+
+        let t = Instant::now();
+        let s = &self.db.summary;
+        let index = SpatialIndex::build(&cut.cut, (s.value_min, s.value_max))?;
+        stats.index_ms = ms(t);
+
+        let scene = SceneGeometry {
+            placement: *placement,
+            layout: *self.db.layout(),
+            spacing: self.db.header.info.spacing,
+        };
+        let settings = RenderSettings {
+            step_factor: cfg.step_factor as f32,
+            early_termination: cfg.early_termination as f32,
+            shading: cfg.shading == Shading::Phong,
+        };
+        let t = Instant::now();
+        let out = self.raycaster.render(
+            &self.gpu, &self.pool, &index, &tf.table, &scene, views, &settings,
+        )?;
+        stats.render_ms = ms(t);
+
+        // Visible nodes of this frame's feedback, pulled up to inner nodes
+        // by the loader at the next refinement (G10 §5).
+        stats.visible = out.feedback.iter().filter(|&&v| v != 0).count() as u64;
+        let c = &cut.stats;
+        stats.cut_nodes = c.nodes as u64;
+        stats.cut_leaves_with_data = c.leaves_with_data as u64;
+        stats.resident = c.gpu_resident as u64;
+        stats.uploaded = c.uploaded as u64;
+        stats.requested = c.requested as u64;
+        stats.cache_hits = c.cache_hits;
+        stats.cache_misses = c.cache_misses;
+        stats.bytes_read = c.bytes_read;
+        stats.adequate = c.adequate && c.requested == 0 && self.loader.in_flight() == 0;
+        self.last = Some((index, out.feedback));
+        stats.total_ms = ms(start);
+        Ok(Frame {
+            images: out.images,
+            stats,
+        })
+    }
+
+    /// Renders until the cut stops changing (every leaf adequate, nothing
+    /// left to read), at most `max_frames` times; returns the last frame.
+    pub fn converge(
+        &mut self,
+        placement: &Placement,
+        views: &[View],
+        cfg: &RenderConfig,
+        max_frames: usize,
+    ) -> Result<Frame> {
+        let sync = std::mem::replace(&mut self.sync_io, true);
+        let mut last = None;
+        for i in 0..max_frames.max(1) {
+            let f = self.frame(i as u64, placement, views, cfg)?;
+            let done = f.stats.adequate && f.stats.uploaded == 0;
+            last = Some(f);
+            if done {
+                break;
+            }
+        }
+        self.sync_io = sync;
+        Ok(last.expect("at least one frame"))
+    }
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
