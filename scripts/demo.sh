@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The demo: imports the Colin27 head MRI into the octree database and shows
-# what is in it. Output goes to out/demo/.
+# The demo: imports the Colin27 head MRI into the out-of-core octree database,
+# then renders it on the desktop display with two transfer functions (opaque
+# skin, translucent brain tissue). Images land in out/demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/setup.sh
@@ -9,5 +10,15 @@ px=target/release/parallax
 out=out/demo
 mkdir -p "$out"
 src=/usr/share/mricron/templates/ch2.nii.gz
+
 $px import "$src" -o "$out/colin27.pxo" --empty-below 10
 $px info "$out/colin27.pxo" --verify
+
+$px render --scene configs/scenes/colin27.toml --frames 8 --sync --out "$out/skin"
+$px render --scene configs/scenes/colin27-brain.toml --frames 8 --sync --out "$out/brain"
+
+cp "$out/skin/frame_00007/window.png" "$out/colin27-skin.png"
+cp "$out/brain/frame_00007/window.png" "$out/colin27-brain.png"
+echo
+echo "Look at: $out/colin27-skin.png and $out/colin27-brain.png"
+echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"

@@ -13,6 +13,9 @@
 // (backend/src/raycast/params.rs). Keep field order and sizes in step.
 
 override SHADING: bool = false;
+// Trilinear filtering by the texture unit (one sample) instead of eight
+// loads; off where the pool's format is not filterable on this device.
+override HW_FILTER: bool = false;
 
 const NONE16: u32 = 0xFFFFu;
 const NO_SLOT: u32 = 0xFFFFFFu;
@@ -56,9 +59,11 @@ struct GpuFrame {
 @group(0) @binding(2) var<storage, read> index: array<IndexNode>;
 @group(0) @binding(3) var pool: texture_3d<f32>;
 @group(0) @binding(4) var<storage, read> slot_range: array<vec2<f32>>;  // (min, max − min) per slot
-@group(0) @binding(5) var<storage, read> table: array<f32>;
+// (τ, k̃r, k̃g, k̃b) interleaved: node values, then the pyramid levels.
+@group(0) @binding(5) var<storage, read> table: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> feedback: array<u32>;
 @group(0) @binding(7) var<storage, read_write> image: array<vec4<f32>>;
+@group(0) @binding(8) var pool_sampler: sampler;
 
 // ---------------------------------------------------------------------------
 // Pre-integration (G10 §4 Eq. 2) over the sum pyramid of common/src/tf:
@@ -69,8 +74,7 @@ fn tf_offset(k: u32) -> u32 {
 }
 
 fn node4(j: u32) -> vec4<f32> {
-    let s = frame.counts.w;
-    return vec4<f32>(table[j], table[s + j], table[2u * s + j], table[3u * s + j]);
+    return table[j];
 }
 
 fn lerp4(u: f32) -> vec4<f32> {
@@ -99,7 +103,6 @@ fn segment_average(sa: f32, sb: f32) -> vec4<f32> {
     var sum = (f32(ja + 1u) - ua) * 0.5 * (lerp4(ua) + node4(ja + 1u));
     var lo = ja + 1u;
     let top = frame.counts.z - 1u;
-    let s = frame.counts.w;
     // Whole bins as aligned dyadic blocks: every term ≥ 0, nothing cancels.
     while (lo < jb) {
         var k = top;
@@ -109,8 +112,7 @@ fn segment_average(sa: f32, sb: f32) -> vec4<f32> {
         while ((1u << k) > jb - lo) {
             k = k - 1u;
         }
-        let i = tf_offset(k) + (lo >> k);
-        sum = sum + vec4<f32>(table[i], table[s + i], table[2u * s + i], table[3u * s + i]);
+        sum = sum + table[tf_offset(k) + (lo >> k)];
         lo = lo + (1u << k);
     }
     if (jb < n) {
@@ -120,8 +122,9 @@ fn segment_average(sa: f32, sb: f32) -> vec4<f32> {
 }
 
 // ---------------------------------------------------------------------------
-// Brick sampling: manual trilinear interpolation of the stored (B+4)³ brick
-// (exact f32 weights; the overlap makes every tap local to the slot).
+// Brick sampling: trilinear interpolation of the stored (B+4)³ brick, by the
+// texture unit or by eight loads with exact f32 weights (the overlap keeps
+// every tap inside the slot).
 
 struct Leaf {
     node: u32,
@@ -146,16 +149,22 @@ fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
     let side = f32(frame.pool.w);
     let local = clamp(p / voxel - leaf.cell * f32(frame.counts.x) + vec3<f32>(OVERLAP - 0.5),
                       vec3<f32>(0.0), vec3<f32>(side - 1.0));
-    let f0 = floor(local);
-    let w = local - f0;
-    let i0 = vec3<i32>(f0);
-    let i1 = min(i0 + vec3<i32>(1), vec3<i32>(i32(frame.pool.w) - 1));
     let o = slot_origin(leaf.slot);
-    let c00 = mix(tap(o, i0), tap(o, vec3<i32>(i1.x, i0.y, i0.z)), w.x);
-    let c10 = mix(tap(o, vec3<i32>(i0.x, i1.y, i0.z)), tap(o, vec3<i32>(i1.x, i1.y, i0.z)), w.x);
-    let c01 = mix(tap(o, vec3<i32>(i0.x, i0.y, i1.z)), tap(o, vec3<i32>(i1.x, i0.y, i1.z)), w.x);
-    let c11 = mix(tap(o, vec3<i32>(i0.x, i1.y, i1.z)), tap(o, i1), w.x);
-    let v = mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+    var v: f32;
+    if (HW_FILTER) {
+        let size = vec3<f32>(frame.pool.xyz * frame.pool.w);
+        v = textureSampleLevel(pool, pool_sampler, (vec3<f32>(o) + local + 0.5) / size, 0.0).r;
+    } else {
+        let f0 = floor(local);
+        let w = local - f0;
+        let i0 = vec3<i32>(f0);
+        let i1 = min(i0 + vec3<i32>(1), vec3<i32>(i32(frame.pool.w) - 1));
+        let c00 = mix(tap(o, i0), tap(o, vec3<i32>(i1.x, i0.y, i0.z)), w.x);
+        let c10 = mix(tap(o, vec3<i32>(i0.x, i1.y, i0.z)), tap(o, vec3<i32>(i1.x, i1.y, i0.z)), w.x);
+        let c01 = mix(tap(o, vec3<i32>(i0.x, i0.y, i1.z)), tap(o, vec3<i32>(i1.x, i0.y, i1.z)), w.x);
+        let c11 = mix(tap(o, vec3<i32>(i0.x, i1.y, i1.z)), tap(o, i1), w.x);
+        v = mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+    }
     let r = slot_range[leaf.slot];
     return r.x + r.y * v;
 }

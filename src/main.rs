@@ -92,6 +92,23 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         backends: usize,
     },
+    /// Error against the exact integral beside frame time for a sweep of
+    /// every quality knob: DIR/bench.csv and DIR/bench.svg.
+    Bench {
+        /// A volume file (the reference integral needs it in memory).
+        #[arg(long, default_value = "/usr/share/mricron/templates/ch2.nii.gz")]
+        volume: PathBuf,
+        /// Transfer function file.
+        #[arg(long, default_value = "configs/tf/colin27-brain.toml")]
+        tf: PathBuf,
+        /// Image size WxH.
+        #[arg(long, default_value = "160x120")]
+        size: String,
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+    },
     /// Describe a database; --verify decodes and checks every brick.
     Info {
         database: PathBuf,
@@ -204,6 +221,36 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(o) = out {
                 println!("images and stats.jsonl in {}", o.display());
             }
+        }
+        Command::Bench {
+            volume,
+            tf,
+            size,
+            repeats,
+            out,
+        } => {
+            let (w, h) = size
+                .split_once('x')
+                .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
+                .with_context(|| format!("--size '{size}': expected WxH, e.g. 160x120"))?;
+            let mut src = data::open(&volume, None)?;
+            let vol = parallax_common::volume::Volume::read_all(src.as_mut())?;
+            let tf = parallax_common::tf::TransferFunction::load(&tf)?;
+            let placement = parallax_common::camera::Placement {
+                center: [0.0, 0.0, 0.0],
+                rotation_deg: [-90.0, 180.0, 0.0],
+                size: 0.25,
+            };
+            let view = parallax_common::camera::View::window([w, h], [0.4, 0.3], [0.0, 0.0, 0.8]);
+            parallax_backend::bench::run(&parallax_backend::bench::BenchOptions {
+                volume: &vol,
+                tf: &tf,
+                placement,
+                view,
+                out: &out,
+                repeats,
+            })?;
+            println!("wrote {0}/bench.csv and {0}/bench.svg", out.display());
         }
         Command::Info { database, verify } => {
             let db = OctreeDb::open(&database)?;

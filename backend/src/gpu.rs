@@ -41,7 +41,9 @@ impl Gpu {
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("parallax"),
-            required_features: wgpu::Features::empty(),
+            // Hardware trilinear filtering of full-precision bricks, where
+            // the adapter has it.
+            required_features: adapter.features() & wgpu::Features::FLOAT32_FILTERABLE,
             // Everything the adapter offers: the brick pool and the images
             // want the largest textures and storage bindings available.
             required_limits: limits,

@@ -2,6 +2,7 @@
 //! data (volume input) → store (octree import and reading) → reference
 //! (the exact integral every image is measured against).
 
+pub mod bench;
 pub mod data;
 pub mod gpu;
 pub mod index;

@@ -5,10 +5,10 @@
 use crate::gpu::Gpu;
 use crate::index::SpatialIndex;
 use crate::loader::{Loader, LoaderConfig};
-use crate::raycast::{BrickPool, Raycaster, RenderSettings, SceneGeometry, TfTable};
+use crate::raycast::{BrickPool, Filtering, Raycaster, RenderSettings, SceneGeometry, TfTable};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{RenderConfig, Shading};
+use parallax_common::config::{Interpolation, RenderConfig, Shading};
 use parallax_common::octree::{BrickEncoding, OctreeDb};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
@@ -45,9 +45,13 @@ impl Renderer {
     pub fn new(database: &Path, cfg: &RenderConfig) -> Result<Self> {
         let db = Arc::new(OctreeDb::open(database)?);
         let gpu = Gpu::new()?;
-        let raycaster = Raycaster::new(&gpu)?;
         let layout = *db.layout();
         let float = db.encoding() != BrickEncoding::U8Range;
+        let filtering = match cfg.interpolation {
+            Interpolation::Hardware => Filtering::Hardware,
+            Interpolation::Exact => Filtering::Exact,
+        };
+        let raycaster = Raycaster::new(&gpu, float, filtering)?;
         let side = layout.stored_side() as u32;
         let budget = (cfg.gpu_cache_mb * (1 << 20) as f64) as u64;
         let slots = BrickPool::slots_for_budget(budget, side, float)
@@ -192,6 +196,7 @@ impl Renderer {
         stats.cache_hits = c.cache_hits;
         stats.cache_misses = c.cache_misses;
         stats.bytes_read = c.bytes_read;
+        stats.cpu_bytes = c.cpu_bytes;
         stats.adequate = c.adequate && c.requested == 0 && self.loader.in_flight() == 0;
         self.last = Some((index, out.feedback));
         stats.total_ms = ms(start);

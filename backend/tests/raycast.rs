@@ -3,7 +3,7 @@
 use parallax_backend::data::synth::{synth_value, SynthKind};
 use parallax_backend::gpu::Gpu;
 use parallax_backend::index::{CutNode, SpatialIndex};
-use parallax_backend::raycast::{BrickPool, Raycaster, RenderSettings, SceneGeometry, TfTable};
+use parallax_backend::raycast::{BrickPool, Filtering, Raycaster, RenderSettings, SceneGeometry, TfTable};
 use parallax_backend::reference::{self, Tolerance};
 use parallax_backend::store::{self, ImportOptions};
 use parallax_common::camera::{Placement, View};
@@ -108,9 +108,22 @@ fn scene(db: &OctreeDb) -> SceneGeometry {
 
 #[test]
 fn full_detail_matches_the_reference_integral() {
+    full_detail(Filtering::Exact, 1e-3);
+}
+
+/// The texture unit's trilinear weights may be of limited precision (many
+/// GPUs use 8-bit fixed-point weights). Bound set on llvmpipe, which filters
+/// r32float with f32 weights and measures the same error as the exact path
+/// (Shepp–Logan 8.1e-4); the margin is for GPUs with coarser weights.
+#[test]
+fn hardware_filtering_error_is_bounded() {
+    full_detail(Filtering::Hardware, 2e-3);
+}
+
+fn full_detail(filtering: Filtering, bound: f64) {
     let gpu = Gpu::new().unwrap();
     eprintln!("adapter: {} ({:?})", gpu.info.name, gpu.info.device_type);
-    let mut rc = Raycaster::new(&gpu).unwrap();
+    let mut rc = Raycaster::new(&gpu, true, filtering).unwrap();
     for kind in [
         SynthKind::MarschnerLobb,
         SynthKind::Shells,
@@ -138,7 +151,7 @@ fn full_detail_matches_the_reference_integral() {
         let want = reference::render(&s.vol, &f, &sc.placement, &view, Tolerance::default());
         let (e, mx) = rmse(&out.images[0], &want);
         let mean_a: f64 = want.iter().map(|p| p[3]).sum::<f64>() / want.len() as f64;
-        eprintln!("{kind:?}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}");
+        eprintln!("{filtering:?} {kind:?}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}");
         if let Ok(dir) = std::env::var("PARALLAX_TEST_IMAGES") {
             let d = std::path::Path::new(&dir);
             let w: Vec<[f32; 4]> = want.iter().map(|p| p.map(|x| x as f32)).collect();
@@ -165,7 +178,7 @@ fn full_detail_matches_the_reference_integral() {
             .unwrap();
         }
         assert!(mean_a > 0.05, "the view sees the volume");
-        assert!(e <= 1e-3, "{kind:?}: RMSE {e}");
+        assert!(e <= bound, "{filtering:?} {kind:?}: RMSE {e}");
         assert!(out.images[0]
             .iter()
             .flatten()
@@ -180,7 +193,7 @@ fn full_detail_matches_the_reference_integral() {
 #[test]
 fn traversal_covers_every_path_exactly_once() {
     let gpu = Gpu::new().unwrap();
-    let mut rc = Raycaster::new(&gpu).unwrap();
+    let mut rc = Raycaster::new(&gpu, true, Filtering::Exact).unwrap();
     let dims = [37, 29, 45];
     let vol = Volume::from_fn(dims, [1.0, 1.5, 0.8], VoxelType::U8, |_, _, _| 100.0);
     let dir = tempfile::tempdir().unwrap();

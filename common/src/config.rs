@@ -77,6 +77,20 @@ pub struct RenderConfig {
     /// Visibility feedback culling (G10 §5).
     #[serde(default = "yes")]
     pub visibility_feedback: bool,
+    /// Brick interpolation: by the texture unit, or exact (eight loads).
+    #[serde(default = "hardware")]
+    pub interpolation: Interpolation,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Interpolation {
+    Hardware,
+    Exact,
+}
+
+fn hardware() -> Interpolation {
+    Interpolation::Hardware
 }
 
 fn default_shading() -> Shading {

@@ -70,6 +70,10 @@ pub struct FrameStats {
     pub cache_misses: u64,
     /// Bytes read from the database so far.
     pub bytes_read: u64,
+    /// Bytes of decoded bricks in the CPU (L2) cache after this frame's
+    /// refinement.
+    #[serde(default)]
+    pub cpu_bytes: u64,
     /// Every leaf of the cut is adequate (the image has converged).
     pub adequate: bool,
     /// An error that ended this back end, if any.

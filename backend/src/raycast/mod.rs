@@ -26,7 +26,13 @@ pub struct TfTable {
 
 impl TfTable {
     pub fn new(gpu: &Gpu, table: &PreintTable) -> Self {
-        let (data, layout) = table.gpu_layout();
+        let (planar, layout) = table.gpu_layout();
+        // Interleave (τ, k̃r, k̃g, k̃b) so that one segment lookup is one
+        // 16-byte load per table entry (ι and ν are not used by DVR).
+        let stride = layout.channel_stride as usize;
+        let data: Vec<[f32; 4]> = (0..stride)
+            .map(|i| std::array::from_fn(|c| planar[c * stride + i]))
+            .collect();
         let buffer = gpu
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -87,9 +93,20 @@ pub struct Raycaster {
     module: wgpu::ShaderModule,
     bind_layout: wgpu::BindGroupLayout,
     pipeline_layout: wgpu::PipelineLayout,
+    sampler: wgpu::Sampler,
+    hw_filter: bool,
     /// One pipeline per active combination of options (G10 §5: a kernel
     /// specialised for what the scene uses).
     pipelines: HashMap<bool, wgpu::ComputePipeline>,
+}
+
+/// How bricks are interpolated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Filtering {
+    /// By the texture unit (one sample; weights at the hardware's precision).
+    Hardware,
+    /// By eight loads with exact f32 weights.
+    Exact,
 }
 
 fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
@@ -106,7 +123,12 @@ fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
 }
 
 impl Raycaster {
-    pub fn new(gpu: &Gpu) -> Result<Self> {
+    /// A ray caster for pools of `float` (r32float) or 8-bit bricks. Asked
+    /// for hardware filtering of a format the device cannot filter, it
+    /// falls back to exact filtering.
+    pub fn new(gpu: &Gpu, float_pool: bool, filtering: Filtering) -> Result<Self> {
+        let hw_filter = filtering == Filtering::Hardware
+            && (!float_pool || gpu.device.features().contains(wgpu::Features::FLOAT32_FILTERABLE));
         let module = gpu.validated("shaders/raycast.wgsl", || {
             gpu.device
                 .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -135,7 +157,7 @@ impl Raycaster {
                         binding: 3,
                         visibility: wgpu::ShaderStages::COMPUTE,
                         ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                            sample_type: wgpu::TextureSampleType::Float { filterable: hw_filter },
                             view_dimension: wgpu::TextureViewDimension::D3,
                             multisampled: false,
                         },
@@ -145,8 +167,29 @@ impl Raycaster {
                     storage(5, true),
                     storage(6, false),
                     storage(7, false),
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 8,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Sampler(if hw_filter {
+                            wgpu::SamplerBindingType::Filtering
+                        } else {
+                            wgpu::SamplerBindingType::NonFiltering
+                        }),
+                        count: None,
+                    },
                 ],
             });
+        let filter = if hw_filter {
+            wgpu::FilterMode::Linear
+        } else {
+            wgpu::FilterMode::Nearest
+        };
+        let sampler = gpu.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("brick pool"),
+            mag_filter: filter,
+            min_filter: filter,
+            ..Default::default()
+        });
         let pipeline_layout = gpu
             .device
             .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -158,13 +201,21 @@ impl Raycaster {
             module,
             bind_layout,
             pipeline_layout,
+            sampler,
+            hw_filter,
             pipelines: HashMap::new(),
         })
     }
 
+    /// Whether bricks are filtered by the texture unit.
+    pub fn hardware_filtering(&self) -> bool {
+        self.hw_filter
+    }
+
     fn pipeline(&mut self, gpu: &Gpu, shading: bool) -> Result<&wgpu::ComputePipeline> {
         if !self.pipelines.contains_key(&shading) {
-            let constants = [("SHADING", if shading { 1.0 } else { 0.0 })];
+            let flag = |b: bool| if b { 1.0 } else { 0.0 };
+            let constants = [("SHADING", flag(shading)), ("HW_FILTER", flag(self.hw_filter))];
             let p = gpu.validated("ray casting pipeline", || {
                 gpu.device
                     .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -314,6 +365,10 @@ impl Raycaster {
                 wgpu::BindGroupEntry {
                     binding: 7,
                     resource: image_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
                 },
             ],
         });

@@ -1,0 +1,214 @@
+//! `parallax bench`: error against the exact integral beside frame time for
+//! a sweep of every quality knob (step size, level of detail, 8-bit bricks,
+//! early termination), written as CSV and as an SVG work–precision plot.
+
+use crate::reference::{self, Tolerance};
+use crate::render::Renderer;
+use crate::store::{self, ImportOptions};
+use anyhow::{Context, Result};
+use parallax_common::camera::{Placement, View};
+use parallax_common::config::{RenderConfig, Shading};
+use parallax_common::octree::BrickEncoding;
+use parallax_common::tf::TransferFunction;
+use parallax_common::volume::{MemorySource, Volume};
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+/// One measured configuration.
+#[derive(Clone, Debug)]
+pub struct Point {
+    pub knob: &'static str,
+    pub value: f64,
+    pub bricks: &'static str,
+    pub frame_ms: f64,
+    pub render_ms: f64,
+    pub rmse: f64,
+    pub max_abs: f64,
+    pub psnr: f64,
+    pub leaves: u64,
+}
+
+/// Error of an image against the reference: RMSE and max abs of the
+/// premultiplied RGBA channels, PSNR (peak 1).
+pub fn image_error(img: &[[f32; 4]], reference: &[[f64; 4]]) -> (f64, f64, f64) {
+    let mut sq = 0.0;
+    let mut mx = 0f64;
+    for (a, b) in img.iter().zip(reference) {
+        for c in 0..4 {
+            let d = a[c] as f64 - b[c];
+            sq += d * d;
+            mx = mx.max(d.abs());
+        }
+    }
+    let rmse = (sq / (4 * img.len().max(1)) as f64).sqrt();
+    (rmse, mx, -20.0 * rmse.max(1e-12).log10())
+}
+
+pub struct BenchOptions<'a> {
+    pub volume: &'a Volume,
+    pub tf: &'a TransferFunction,
+    pub placement: Placement,
+    pub view: View,
+    pub out: &'a Path,
+    /// Timed frames per configuration (the median is reported).
+    pub repeats: usize,
+}
+
+/// Runs the sweep and writes `bench.csv` and `bench.svg` into `out`.
+pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
+    std::fs::create_dir_all(o.out)?;
+    let t = Instant::now();
+    let reference = reference::render(o.volume, o.tf, &o.placement, &o.view, Tolerance { abs: 1e-6 });
+    let ref_s = t.elapsed().as_secs_f64();
+    eprintln!("reference integral: {ref_s:.1} s");
+    let dbs = o.out.join("db");
+    std::fs::create_dir_all(&dbs)?;
+    let mut paths = Vec::new();
+    for (name, enc) in [("full", BrickEncoding::F32), ("8-bit", BrickEncoding::U8Range)] {
+        let p = dbs.join(format!("{name}.pxo"));
+        store::import(
+            &mut MemorySource::new(o.volume),
+            &p,
+            "bench volume",
+            &ImportOptions {
+                encoding: enc,
+                ..Default::default()
+            },
+        )?;
+        paths.push((name, p));
+    }
+    let base = RenderConfig {
+        accuracy: 0.01,
+        step_factor: 0.25,
+        early_termination: 1.0,
+        visibility_feedback: false,
+        shading: Shading::None,
+        cpu_cache_mb: 2048.0,
+        gpu_cache_mb: 1024.0,
+        upload_budget: 100_000,
+        ..RenderConfig::default()
+    };
+    let mut sweeps: Vec<(&'static str, f64, &'static str, RenderConfig)> = Vec::new();
+    for s in [0.0625, 0.125, 0.25, 0.5, 1.0, 2.0] {
+        sweeps.push(("step_factor", s, "full", RenderConfig { step_factor: s, ..base.clone() }));
+    }
+    for a in [1.0, 2.0, 4.0, 8.0, 16.0] {
+        sweeps.push(("accuracy", a, "full", RenderConfig { accuracy: a, ..base.clone() }));
+    }
+    sweeps.push((
+        "interpolation_exact",
+        1.0,
+        "full",
+        RenderConfig {
+            interpolation: parallax_common::config::Interpolation::Exact,
+            ..base.clone()
+        },
+    ));
+    for e in [0.9, 0.95, 0.99] {
+        sweeps.push(("early_termination", e, "full", RenderConfig { early_termination: e, ..base.clone() }));
+    }
+    for s in [0.125, 0.25, 0.5, 1.0] {
+        sweeps.push(("step_factor", s, "8-bit", RenderConfig { step_factor: s, ..base.clone() }));
+    }
+    let mut points = Vec::new();
+    for (knob, value, bricks, cfg) in sweeps {
+        let db = &paths.iter().find(|(n, _)| *n == bricks).unwrap().1;
+        let mut r = Renderer::new(db, &cfg)?;
+        r.set_transfer_function(1, o.tf)?;
+        let f = r.converge(&o.placement, &[o.view], &cfg, 64)?;
+        let mut frame_ms = Vec::new();
+        let mut render_ms = Vec::new();
+        let mut last = f;
+        for i in 0..o.repeats.max(1) {
+            let t = Instant::now();
+            last = r.frame(100 + i as u64, &o.placement, &[o.view], &cfg)?;
+            frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+            render_ms.push(last.stats.render_ms);
+        }
+        let (rmse, max_abs, psnr) = image_error(&last.images[0], &reference);
+        let p = Point {
+            knob,
+            value,
+            bricks,
+            frame_ms: median(&mut frame_ms),
+            render_ms: median(&mut render_ms),
+            rmse,
+            max_abs,
+            psnr,
+            leaves: last.stats.cut_leaves_with_data,
+        };
+        eprintln!(
+            "{knob:>17} = {value:<7} {bricks:>5}: {:8.1} ms/frame, RMSE {:.2e}, max {:.2e}, PSNR {:.1} dB, {} bricks",
+            p.frame_ms, p.rmse, p.max_abs, p.psnr, p.leaves
+        );
+        points.push(p);
+    }
+    write_csv(&o.out.join("bench.csv"), &points)?;
+    plot(&o.out.join("bench.svg"), &points)?;
+    Ok(points)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn write_csv(path: &Path, points: &[Point]) -> Result<()> {
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).with_context(|| format!("{}", path.display()))?);
+    writeln!(f, "knob,value,bricks,frame_ms,render_ms,rmse,max_abs,psnr_db,bricks_in_cut")?;
+    for p in points {
+        writeln!(
+            f,
+            "{},{},{},{:.3},{:.3},{:.6e},{:.6e},{:.2},{}",
+            p.knob, p.value, p.bricks, p.frame_ms, p.render_ms, p.rmse, p.max_abs, p.psnr, p.leaves
+        )?;
+    }
+    Ok(())
+}
+
+/// Work–precision plot: RMSE (log) against frame time, one series per knob.
+fn plot(path: &Path, points: &[Point]) -> Result<()> {
+    use plotters::prelude::*;
+    let root = SVGBackend::new(path, (800, 560)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let tmax = points.iter().map(|p| p.frame_ms).fold(1.0, f64::max) * 1.1;
+    let emin = points.iter().map(|p| p.rmse.max(1e-7)).fold(1.0, f64::min) / 2.0;
+    let emax = points.iter().map(|p| p.rmse).fold(1e-6, f64::max) * 2.0;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("error against the exact integral vs frame time", ("sans-serif", 20))
+        .margin(16)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..tmax, (emin..emax).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("frame time (ms)")
+        .y_desc("RMSE (premultiplied RGBA)")
+        .draw()?;
+    let series = [
+        ("step_factor", "full", RED),
+        ("accuracy", "full", BLUE),
+        ("early_termination", "full", GREEN),
+        ("step_factor", "8-bit", MAGENTA),
+    ];
+    for (knob, bricks, color) in series {
+        let pts: Vec<(f64, f64)> = points
+            .iter()
+            .filter(|p| p.knob == knob && p.bricks == bricks)
+            .map(|p| (p.frame_ms, p.rmse.max(1e-7)))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+            .label(format!("{knob} ({bricks} bricks)"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
