@@ -59,13 +59,22 @@ pub struct BenchOptions<'a> {
 pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
     std::fs::create_dir_all(o.out)?;
     let t = Instant::now();
-    let reference = reference::render(o.volume, o.tf, &o.placement, &o.view, Tolerance { abs: 1e-6 });
+    let reference = reference::render(
+        o.volume,
+        o.tf,
+        &o.placement,
+        &o.view,
+        Tolerance { abs: 1e-6 },
+    );
     let ref_s = t.elapsed().as_secs_f64();
     eprintln!("reference integral: {ref_s:.1} s");
     let dbs = o.out.join("db");
     std::fs::create_dir_all(&dbs)?;
     let mut paths = Vec::new();
-    for (name, enc) in [("full", BrickEncoding::F32), ("8-bit", BrickEncoding::U8Range)] {
+    for (name, enc) in [
+        ("full", BrickEncoding::F32),
+        ("8-bit", BrickEncoding::U8Range),
+    ] {
         let p = dbs.join(format!("{name}.pxo"));
         store::import(
             &mut MemorySource::new(o.volume),
@@ -91,10 +100,26 @@ pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
     };
     let mut sweeps: Vec<(&'static str, f64, &'static str, RenderConfig)> = Vec::new();
     for s in [0.0625, 0.125, 0.25, 0.5, 1.0, 2.0] {
-        sweeps.push(("step_factor", s, "full", RenderConfig { step_factor: s, ..base.clone() }));
+        sweeps.push((
+            "step_factor",
+            s,
+            "full",
+            RenderConfig {
+                step_factor: s,
+                ..base.clone()
+            },
+        ));
     }
     for a in [1.0, 2.0, 4.0, 8.0, 16.0] {
-        sweeps.push(("accuracy", a, "full", RenderConfig { accuracy: a, ..base.clone() }));
+        sweeps.push((
+            "accuracy",
+            a,
+            "full",
+            RenderConfig {
+                accuracy: a,
+                ..base.clone()
+            },
+        ));
     }
     sweeps.push((
         "interpolation_exact",
@@ -106,10 +131,26 @@ pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
         },
     ));
     for e in [0.9, 0.95, 0.99] {
-        sweeps.push(("early_termination", e, "full", RenderConfig { early_termination: e, ..base.clone() }));
+        sweeps.push((
+            "early_termination",
+            e,
+            "full",
+            RenderConfig {
+                early_termination: e,
+                ..base.clone()
+            },
+        ));
     }
     for s in [0.125, 0.25, 0.5, 1.0] {
-        sweeps.push(("step_factor", s, "8-bit", RenderConfig { step_factor: s, ..base.clone() }));
+        sweeps.push((
+            "step_factor",
+            s,
+            "8-bit",
+            RenderConfig {
+                step_factor: s,
+                ..base.clone()
+            },
+        ));
     }
     let mut points = Vec::new();
     for (knob, value, bricks, cfg) in sweeps {
@@ -155,8 +196,13 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 fn write_csv(path: &Path, points: &[Point]) -> Result<()> {
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).with_context(|| format!("{}", path.display()))?);
-    writeln!(f, "knob,value,bricks,frame_ms,render_ms,rmse,max_abs,psnr_db,bricks_in_cut")?;
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("{}", path.display()))?,
+    );
+    writeln!(
+        f,
+        "knob,value,bricks,frame_ms,render_ms,rmse,max_abs,psnr_db,bricks_in_cut"
+    )?;
     for p in points {
         writeln!(
             f,
@@ -176,7 +222,10 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
     let emin = points.iter().map(|p| p.rmse.max(1e-7)).fold(1.0, f64::min) / 2.0;
     let emax = points.iter().map(|p| p.rmse).fold(1e-6, f64::max) * 2.0;
     let mut chart = ChartBuilder::on(&root)
-        .caption("error against the exact integral vs frame time", ("sans-serif", 20))
+        .caption(
+            "error against the exact integral vs frame time",
+            ("sans-serif", 20),
+        )
         .margin(16)
         .x_label_area_size(40)
         .y_label_area_size(70)
@@ -201,7 +250,9 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
         chart
             .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
             .label(format!("{knob} ({bricks} bricks)"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
         chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
     }
     chart

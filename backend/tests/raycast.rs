@@ -3,7 +3,9 @@
 use parallax_backend::data::synth::{synth_value, SynthKind};
 use parallax_backend::gpu::Gpu;
 use parallax_backend::index::{CutNode, SpatialIndex};
-use parallax_backend::raycast::{BrickPool, Filtering, Raycaster, RenderSettings, SceneGeometry, TfTable};
+use parallax_backend::raycast::{
+    BrickPool, Filtering, Raycaster, RenderSettings, SceneGeometry, TfTable,
+};
 use parallax_backend::reference::{self, Tolerance};
 use parallax_backend::store::{self, ImportOptions};
 use parallax_common::camera::{Placement, View};

@@ -12,7 +12,7 @@ use parallax_backend::reference::{self, Tolerance};
 use parallax_backend::render::{Frame, Renderer};
 use parallax_backend::store::{self, ImportOptions};
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{RenderConfig, Shading};
+use parallax_common::config::{Interpolation, RenderConfig, Shading};
 use parallax_common::octree::{BrickEncoding, NodeKey, OctreeDb};
 use parallax_common::tf::{ControlPoint, EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::volume::{MemorySource, Volume, VoxelType};
@@ -63,6 +63,7 @@ fn exact_config() -> RenderConfig {
         early_termination: 1.0,
         accuracy: 0.01,
         visibility_feedback: false,
+        interpolation: Interpolation::Exact,
         ..RenderConfig::default()
     }
 }
@@ -412,7 +413,10 @@ fn visibility_feedback_shrinks_the_opaque_cut() {
         &db,
         COLIN27,
         &ImportOptions {
-            brick: 16,
+            brick: std::env::var("PX_BRICK")
+                .ok()
+                .and_then(|s| s.parse().ok())
+                .unwrap_or(16),
             encoding: BrickEncoding::U8Range,
             ..Default::default()
         },
@@ -431,6 +435,11 @@ fn visibility_feedback_shrinks_the_opaque_cut() {
             shading: Shading::None,
             accuracy,
             visibility_feedback: feedback,
+            interpolation: if std::env::var("PX_EXACT").is_ok() {
+                Interpolation::Exact
+            } else {
+                Interpolation::Hardware
+            },
             ..RenderConfig::default()
         };
         let mut r = renderer(&db, &tf, &cfg);
@@ -498,7 +507,12 @@ fn out_of_core_volume_converges_within_budget() {
     let decoded = stored * layout.stored_len() as u64 * 4;
     let slot = BrickPool::slot_bytes(layout.stored_side() as u32, false);
     let mib = (1u64 << 20) as f64;
-    let envf = |k: &str, d: f64| std::env::var(k).ok().and_then(|s| s.parse().ok()).unwrap_or(d);
+    let envf = |k: &str, d: f64| {
+        std::env::var(k)
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(d)
+    };
     let cfg = RenderConfig {
         shading: Shading::None,
         accuracy: envf("PX_ACC5", 1.0),

@@ -128,7 +128,11 @@ impl Raycaster {
     /// falls back to exact filtering.
     pub fn new(gpu: &Gpu, float_pool: bool, filtering: Filtering) -> Result<Self> {
         let hw_filter = filtering == Filtering::Hardware
-            && (!float_pool || gpu.device.features().contains(wgpu::Features::FLOAT32_FILTERABLE));
+            && (!float_pool
+                || gpu
+                    .device
+                    .features()
+                    .contains(wgpu::Features::FLOAT32_FILTERABLE));
         let module = gpu.validated("shaders/raycast.wgsl", || {
             gpu.device
                 .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -157,7 +161,9 @@ impl Raycaster {
                         binding: 3,
                         visibility: wgpu::ShaderStages::COMPUTE,
                         ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: hw_filter },
+                            sample_type: wgpu::TextureSampleType::Float {
+                                filterable: hw_filter,
+                            },
                             view_dimension: wgpu::TextureViewDimension::D3,
                             multisampled: false,
                         },
@@ -215,7 +221,10 @@ impl Raycaster {
     fn pipeline(&mut self, gpu: &Gpu, shading: bool) -> Result<&wgpu::ComputePipeline> {
         if !self.pipelines.contains_key(&shading) {
             let flag = |b: bool| if b { 1.0 } else { 0.0 };
-            let constants = [("SHADING", flag(shading)), ("HW_FILTER", flag(self.hw_filter))];
+            let constants = [
+                ("SHADING", flag(shading)),
+                ("HW_FILTER", flag(self.hw_filter)),
+            ];
             let p = gpu.validated("ray casting pipeline", || {
                 gpu.device
                     .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {

@@ -1,0 +1,230 @@
+//! The real `parallax` binary, end to end: synth → import → info --verify →
+//! render, and the errors a user sees for bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn parallax(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_parallax"))
+        .args(args)
+        .output()
+        .expect("run parallax")
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = parallax(args);
+    let out = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(
+        o.status.success(),
+        "parallax {args:?} failed:\n{out}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    out
+}
+
+fn fails(args: &[&str]) -> String {
+    let o = parallax(args);
+    assert!(!o.status.success(), "parallax {args:?} should fail");
+    String::from_utf8_lossy(&o.stderr).to_string()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn synth_import_info_verify() {
+    let d = tempfile::tempdir().unwrap();
+    let vol = d.path().join("sl.nrrd");
+    ok(&[
+        "synth",
+        "shepp-logan",
+        "--size",
+        "48",
+        "--type",
+        "u16",
+        "-o",
+        s(&vol),
+    ]);
+    let db = d.path().join("sl.pxo");
+    let out = ok(&[
+        "import",
+        s(&vol),
+        "-o",
+        s(&db),
+        "--brick",
+        "16",
+        "--empty-below",
+        "1",
+    ]);
+    assert!(out.contains("MB/s"), "{out}");
+    let info = ok(&["info", s(&db), "--verify"]);
+    assert!(info.contains("48 × 48 × 48 u16"), "{info}");
+    assert!(info.contains("levels:        3"), "{info}");
+    assert!(info.contains("verify:        ok"), "{info}");
+    assert!(info.contains("quantisation:  RMS"), "{info}");
+
+    // one flipped byte in the middle of the brick area: named, refused
+    let mut bytes = std::fs::read(&db).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x5a;
+    let bad = d.path().join("bad.pxo");
+    std::fs::write(&bad, &bytes).unwrap();
+    let e = fails(&["info", s(&bad), "--verify"]);
+    assert!(
+        e.contains("bad.pxo") && e.contains("brick level") && e.contains("checksum"),
+        "{e}"
+    );
+}
+
+#[test]
+fn bad_input_gets_a_clear_error_and_keeps_existing_output() {
+    let d = tempfile::tempdir().unwrap();
+    let raw = d.path().join("v.raw");
+    std::fs::write(&raw, vec![7u8; 1000]).unwrap();
+    let out = d.path().join("keep.pxo");
+    std::fs::write(&out, b"earlier result").unwrap();
+    let e = fails(&[
+        "import",
+        s(&raw),
+        "-o",
+        s(&out),
+        "--dims",
+        "10,10,11",
+        "--type",
+        "u8",
+    ]);
+    assert!(e.contains("v.raw") && e.contains("1100"), "{e}");
+    assert_eq!(std::fs::read(&out).unwrap(), b"earlier result");
+    let e = fails(&[
+        "import",
+        s(&raw),
+        "-o",
+        s(&out),
+        "--dims",
+        "10,10",
+        "--type",
+        "u8",
+    ]);
+    assert!(e.contains("--dims"), "{e}");
+    let nrrd = d.path().join("a.nrrd");
+    std::fs::write(
+        &nrrd,
+        "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: ascii\n\n0 1 2 3 4 5 6 7\n",
+    )
+    .unwrap();
+    let e = fails(&["import", s(&nrrd), "-o", s(&out)]);
+    assert!(e.contains("a.nrrd") && e.contains("ascii"), "{e}");
+    let e = fails(&[
+        "import",
+        s(&raw),
+        "-o",
+        s(&out),
+        "--dims",
+        "10,10,10",
+        "--type",
+        "u8",
+        "--quantize",
+        "u12",
+    ]);
+    assert!(e.contains("--quantize"), "{e}");
+    let e = fails(&["info", s(&d.path().join("missing.pxo"))]);
+    assert!(e.contains("missing.pxo"), "{e}");
+    assert_eq!(std::fs::read(&out).unwrap(), b"earlier result");
+}
+
+fn write(p: PathBuf, text: &str) -> PathBuf {
+    std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn render_writes_images_floats_and_stats() {
+    let d = tempfile::tempdir().unwrap();
+    let vol = d.path().join("ml.nrrd");
+    ok(&["synth", "marschner-lobb", "--size", "40", "-o", s(&vol)]);
+    let db = d.path().join("ml.pxo");
+    ok(&["import", s(&vol), "-o", s(&db), "--brick", "16"]);
+    write(
+        d.path().join("tf.toml"),
+        "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 128\ncolor = [1, 0.5, 0.2]\nextinction = 0.05\n[[point]]\nvalue = 255\ncolor = [1, 1, 1]\nextinction = 0.2\n",
+    );
+    write(
+        d.path().join("display.toml"),
+        "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.005\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
+    );
+    write(
+        d.path().join("p/left.toml"),
+        "id = \"left\"\nposition = [-0.05, 0, 0.8]\nresolution = [32, 24]\n",
+    );
+    write(
+        d.path().join("p/right.toml"),
+        "id = \"right\"\nposition = [0.05, 0, 0.8]\nresolution = [40, 30]\n",
+    );
+    let scene = write(
+        d.path().join("scene.toml"),
+        "volume = \"ml.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\nrotation_deg = [10, 20, 0]\n[render]\nshading = \"phong\"\n",
+    );
+    let out = d.path().join("out");
+    let text = ok(&[
+        "render",
+        "--scene",
+        s(&scene),
+        "--frames",
+        "6",
+        "--out",
+        s(&out),
+        "--float",
+        "--sync",
+    ]);
+    assert!(text.contains("converged"), "{text}");
+    for id in ["left", "right"] {
+        let png = out.join(format!("frame_00005/{id}.png"));
+        assert!(
+            std::fs::metadata(&png).unwrap().len() > 100,
+            "{}",
+            png.display()
+        );
+        let (w, h, px) =
+            parallax_backend::output::read_npy(&out.join(format!("frame_00005/{id}.npy"))).unwrap();
+        assert_eq!((w, h), if id == "left" { (32, 24) } else { (40, 30) });
+        assert!(px
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite() && *v >= 0.0 && *v <= 1.0));
+        assert!(px.iter().any(|p| p[3] > 0.1), "{id} sees the volume");
+    }
+    let stats = std::fs::read_to_string(out.join("stats.jsonl")).unwrap();
+    let lines: Vec<serde_json::Value> = stats
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 6, "one line per rank per frame");
+    let last = &lines[5];
+    for key in [
+        "refine_ms",
+        "render_ms",
+        "cut_nodes",
+        "resident",
+        "uploaded",
+        "visible",
+        "cache_hits",
+        "bytes_read",
+    ] {
+        assert!(last.get(key).is_some(), "stats has {key}");
+    }
+    assert!(last["bytes_read"].as_u64().unwrap() > 0);
+    assert_eq!(last["views"].as_u64().unwrap(), 2);
+
+    // a malformed scene names the file and the field
+    let bad = write(d.path().join("bad.toml"), "volume = \"ml.pxo\"\ntransfer_function = \"tf.toml\"\n[placement]\ncenter = [0, 0]\nsize = 0.2\n");
+    let e = fails(&[
+        "render",
+        "--scene",
+        s(&bad),
+        "--display",
+        s(&d.path().join("display.toml")),
+    ]);
+    assert!(e.contains("bad.toml") && e.contains("center"), "{e}");
+}
