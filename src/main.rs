@@ -109,6 +109,38 @@ enum Command {
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
     },
+    /// Write a HoloVizio-like light field wall: DIR/display.toml and one
+    /// file per projector (defaults: the 72-projector wall of G10 §6).
+    DisplayGen {
+        #[arg(long, default_value_t = 72)]
+        projectors: usize,
+        /// Per projector, WxH.
+        #[arg(long, default_value = "800x600")]
+        resolution: String,
+        /// Screen size WxH in metres.
+        #[arg(long, default_value = "1.6x0.9")]
+        screen: String,
+        /// Pixel size s0 on the screen (m).
+        #[arg(long, default_value_t = 0.0015)]
+        pixel_size: f64,
+        /// Angular accuracy Φ (degrees).
+        #[arg(long, default_value_t = 0.8)]
+        angular_accuracy: f64,
+        /// Horizontal field of view (degrees).
+        #[arg(long, default_value_t = 50.0)]
+        fov: f64,
+        /// Projector distance behind the screen (m).
+        #[arg(long, default_value_t = 2.0)]
+        distance: f64,
+        /// Observer position x,y,z (m).
+        #[arg(long, default_value = "0,0,2", allow_hyphen_values = true)]
+        observer: String,
+        /// arc | line
+        #[arg(long, default_value = "arc")]
+        layout: String,
+        #[arg(short, long)]
+        output: PathBuf,
+    },
     /// Describe a database; --verify decodes and checks every brick.
     Info {
         database: PathBuf,
@@ -217,8 +249,13 @@ fn run(cli: Cli) -> Result<()> {
                 sync_io: sync,
                 verbose: true,
             };
-            render_embedded(&opts, backends)?;
-            if let Some(o) = out {
+            let coordinator = if parallax_frontend::cluster::launched_by_mpi() {
+                render_mpi(&opts)?
+            } else {
+                render_embedded(&opts, backends)?;
+                true
+            };
+            if let (true, Some(o)) = (coordinator, out) {
                 println!("images and stats.jsonl in {}", o.display());
             }
         }
@@ -252,6 +289,39 @@ fn run(cli: Cli) -> Result<()> {
             })?;
             println!("wrote {0}/bench.csv and {0}/bench.svg", out.display());
         }
+        Command::DisplayGen {
+            projectors,
+            resolution,
+            screen,
+            pixel_size,
+            angular_accuracy,
+            fov,
+            distance,
+            observer,
+            layout,
+            output,
+        } => {
+            let spec = parallax_common::wall::WallSpec {
+                projectors,
+                resolution: parse_pair::<u32>(&resolution, "--resolution")?,
+                screen: parse_pair::<f64>(&screen, "--screen")?,
+                pixel_size,
+                angular_accuracy_deg: angular_accuracy,
+                fov_deg: fov,
+                distance,
+                observer: parse_triple::<f64>(&observer, "--observer")?,
+                layout: match layout.as_str() {
+                    "arc" => parallax_common::wall::Layout::Arc,
+                    "line" => parallax_common::wall::Layout::Line,
+                    other => bail!("--layout '{other}': expected arc or line"),
+                },
+            };
+            spec.write(&output)?;
+            println!(
+                "wrote {}/display.toml and {projectors} projector files",
+                output.display()
+            );
+        }
         Command::Info { database, verify } => {
             let db = OctreeDb::open(&database)?;
             print!("{}", info::describe(&db));
@@ -265,6 +335,32 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The cluster mode, under `mpirun -n K`: rank 0 coordinates, ranks 1…K−1
+/// render (one MPI process alone runs the embedded mode).
+/// Returns whether this process was the coordinator.
+fn render_mpi(opts: &parallax_frontend::RunOptions) -> Result<bool> {
+    use mpi::traits::Communicator;
+    let universe = mpi::initialize().context("MPI initialisation failed")?;
+    let world = universe.world();
+    let (rank, size) = (world.rank(), world.size() as usize);
+    if size < 2 {
+        drop(universe);
+        return render_embedded(opts, 1).map(|_| true);
+    }
+    if rank == 0 {
+        let mut t = parallax_frontend::cluster::transport(world);
+        parallax_frontend::run(opts, &mut t).map(|_| true)
+    } else {
+        let mut link = parallax_frontend::cluster::link(world);
+        // A back end's error has been reported to rank 0, which exits
+        // non-zero naming it; the back end itself ends quietly.
+        if let Err(e) = parallax_backend::node::serve(&mut link, size - 1) {
+            eprintln!("rank {rank}: {e:#}");
+        }
+        Ok(false)
+    }
 }
 
 /// The embedded mode: the front end on this thread, the back ends on
@@ -304,6 +400,18 @@ fn render_embedded(opts: &parallax_frontend::RunOptions, backends: usize) -> Res
 
 fn parse_type(s: &str, flag: &str) -> Result<VoxelType> {
     VoxelType::parse(s).with_context(|| format!("{flag} '{s}': expected u8, u16, i16 or f32"))
+}
+
+fn parse_pair<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 2]> {
+    let (a, b) = s
+        .split_once('x')
+        .with_context(|| format!("{flag} '{s}': expected AxB"))?;
+    let p = |t: &str| {
+        t.trim()
+            .parse::<T>()
+            .map_err(|_| anyhow::anyhow!("{flag} '{s}': '{t}' is not a number"))
+    };
+    Ok([p(a)?, p(b)?])
 }
 
 fn parse_triple<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 3]> {

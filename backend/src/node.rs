@@ -19,25 +19,44 @@ struct Setup {
     renderer: Renderer,
 }
 
-/// Serves the front end until it says quit. An error is reported to the
-/// front end (so it does not wait forever) and returned.
+/// Serves the front end until it says quit. After an error the back end
+/// keeps answering every frame with that error (so the front end, which
+/// waits for every back end each frame, learns which rank failed instead of
+/// hanging) until it is told to quit; the error is then returned.
 pub fn serve(link: &mut dyn Link, backends: usize) -> Result<()> {
     let mut setup: Option<Setup> = None;
+    let mut failed: Option<anyhow::Error> = None;
     loop {
         let msg = link.receive()?;
-        let result = handle(link, backends, &mut setup, msg);
-        match result {
+        if let Some(e) = &failed {
+            match msg {
+                ToBackend::Quit => return Err(failed.take().unwrap()),
+                ToBackend::Frame(_) => link.reply(&error_stats(link.rank(), e))?,
+                _ => {}
+            }
+            continue;
+        }
+        let frame = matches!(msg, ToBackend::Frame(_));
+        match handle(link, backends, &mut setup, msg) {
             Ok(true) => return Ok(()),
             Ok(false) => {}
             Err(e) => {
-                let _ = link.reply(&FrameStats {
-                    rank: link.rank(),
-                    error: Some(format!("{e:#}")),
-                    ..Default::default()
-                });
-                return Err(e);
+                if frame {
+                    link.reply(&error_stats(link.rank(), &e))?;
+                }
+                // Free the renderer (and its device) now.
+                setup = None;
+                failed = Some(e);
             }
         }
+    }
+}
+
+fn error_stats(rank: u32, e: &anyhow::Error) -> FrameStats {
+    FrameStats {
+        rank,
+        error: Some(format!("{e:#}")),
+        ..Default::default()
     }
 }
 
@@ -73,6 +92,7 @@ fn handle(
             s.renderer.set_transfer_function(version, &tf)?;
         }
         ToBackend::Frame(state) => {
+            fault_injection(link.rank(), state.frame);
             let s = setup.as_mut().context("frame before setup")?;
             let mut stats = render_frame(s, &state)?;
             stats.rank = link.rank();
@@ -124,4 +144,21 @@ fn render_frame(s: &mut Setup, state: &FrameState) -> Result<FrameStats> {
     stats.output_ms = t.elapsed().as_secs_f64() * 1e3;
     stats.total_ms = start.elapsed().as_secs_f64() * 1e3;
     Ok(stats)
+}
+
+/// `PARALLAX_FAULT=exit:<rank>:<frame>` makes back end `<rank>` die at frame
+/// `<frame>` without a word, as a crashed node would: how the tests check
+/// that a run with a dead back end ends with an error naming it instead of
+/// hanging.
+fn fault_injection(rank: u32, frame: u64) {
+    if let Ok(spec) = std::env::var("PARALLAX_FAULT") {
+        let parts: Vec<&str> = spec.split(':').collect();
+        if parts.len() == 3
+            && parts[0] == "exit"
+            && parts[1].parse() == Ok(rank)
+            && parts[2].parse() == Ok(frame)
+        {
+            std::process::exit(70);
+        }
+    }
 }

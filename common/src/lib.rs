@@ -5,6 +5,7 @@
 //! * [`protocol`]: the messages between the front end and the back ends.
 //! * [`volume`]: scalar volumes and slice-by-slice sources.
 //! * [`tf`]: transfer functions and their pre-integration tables (G10 §4).
+//! * [`wall`]: generated light field walls (G10 §6).
 //! * [`octree`]: the out-of-core octree database (`.pxo`) (G10 §5, G08 §3).
 
 pub mod camera;
@@ -13,3 +14,4 @@ pub mod octree;
 pub mod protocol;
 pub mod tf;
 pub mod volume;
+pub mod wall;

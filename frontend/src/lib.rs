@@ -3,6 +3,8 @@
 //! `FrameState`, waits for every back end's `FrameStats` (frames are
 //! swap-locked) and writes them to `stats.jsonl`.
 
+pub mod cluster;
+
 use anyhow::{bail, Context, Result};
 use parallax_common::config::{Display, Scene};
 use parallax_common::protocol::{FrameState, FrameStats, ToBackend, Transport};
