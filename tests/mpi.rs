@@ -1,0 +1,275 @@
+//! Cluster mode under a real `mpirun`: every projector image equals the same
+//! projector rendered in the embedded mode; bad displays and a dead back end
+//! end with a clear error instead of a hang.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::Duration;
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_parallax")
+}
+
+fn mpirun(n: usize, args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut c = Command::new("timeout");
+    c.arg("120")
+        .arg("mpirun")
+        .arg("-n")
+        .arg(n.to_string())
+        .arg(bin())
+        .args(args)
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_rmaps_base_oversubscribe", "1");
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.output()
+        .expect("mpirun (install openmpi-bin: scripts/setup.sh)")
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(bin()).args(args).output().unwrap()
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+struct World {
+    dir: tempfile::TempDir,
+}
+
+impl World {
+    /// A small volume, a transfer function, a 4-projector wall and a scene.
+    fn new() -> World {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let vol = d.join("v.nrrd");
+        assert!(run(&["synth", "shells", "--size", "48", "-o", s(&vol)])
+            .status
+            .success());
+        assert!(run(&[
+            "import",
+            s(&vol),
+            "-o",
+            s(&d.join("v.pxo")),
+            "--brick",
+            "16"
+        ])
+        .status
+        .success());
+        std::fs::write(
+            d.join("tf.toml"),
+            "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 100\ncolor = [0.2, 0.5, 1]\nextinction = 0.05\n[[point]]\nvalue = 255\ncolor = [1, 0.8, 0.4]\nextinction = 0.4\n",
+        )
+        .unwrap();
+        let gen = run(&[
+            "display-gen",
+            "--projectors",
+            "4",
+            "--resolution",
+            "48x27",
+            "--pixel-size",
+            "0.0333",
+            "--angular-accuracy",
+            "12.5",
+            "-o",
+            s(&d.join("wall")),
+        ]);
+        assert!(gen.status.success(), "{}", text(&gen));
+        std::fs::write(
+            d.join("scene.toml"),
+            "volume = \"v.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"wall/display.toml\"\n[placement]\ncenter = [0, 0, 0.1]\nsize = 0.5\nrotation_deg = [15, 30, 0]\n[render]\neta = 1.0\nshading = \"phong\"\n",
+        )
+        .unwrap();
+        World { dir }
+    }
+
+    fn path(&self, p: &str) -> PathBuf {
+        self.dir.path().join(p)
+    }
+
+    fn render_args<'a>(&'a self, out: &'a Path, scene: &'a Path) -> Vec<&'a str> {
+        vec![
+            "render",
+            "--scene",
+            s(scene),
+            "--frames",
+            "4",
+            "--sync",
+            "--float",
+            "--out",
+            s(out),
+        ]
+    }
+}
+
+fn npy(dir: &Path, frame: u32, id: &str) -> Vec<[f32; 4]> {
+    parallax_backend::output::read_npy(&dir.join(format!("frame_{frame:05}/{id}.npy")))
+        .unwrap()
+        .2
+}
+
+#[test]
+fn cluster_images_equal_the_embedded_ones() {
+    let w = World::new();
+    let scene = w.path("scene.toml");
+    for ranks in [2usize, 3, 5] {
+        let backends = ranks - 1;
+        let cluster = w.path(&format!("cluster{ranks}"));
+        let o = mpirun(ranks, &w.render_args(&cluster, &scene), &[]);
+        assert!(o.status.success(), "mpirun -n {ranks}: {}", text(&o));
+        let embedded = w.path(&format!("embedded{ranks}"));
+        let mut args = w.render_args(&embedded, &scene);
+        let b = backends.to_string();
+        args.extend(["--backends", &b]);
+        let o = run(&args);
+        assert!(o.status.success(), "{}", text(&o));
+        for id in ["p00", "p01", "p02", "p03"] {
+            for frame in [1, 3] {
+                let (c, e) = (npy(&cluster, frame, id), npy(&embedded, frame, id));
+                assert_eq!(c, e, "{ranks} ranks, projector {id}, frame {frame}");
+            }
+            assert!(
+                npy(&cluster, 3, id).iter().any(|p| p[3] > 0.1),
+                "{id} sees the volume"
+            );
+        }
+        // one stats line per back end per frame
+        let stats = std::fs::read_to_string(cluster.join("stats.jsonl")).unwrap();
+        assert_eq!(stats.lines().count(), 4 * backends, "{ranks} ranks");
+        eprintln!("{ranks} ranks: identical to the embedded mode");
+    }
+    // the parallax is real: neighbouring projectors see different images
+    let c = w.path("cluster5");
+    assert_ne!(npy(&c, 3, "p00"), npy(&c, 3, "p01"));
+}
+
+#[test]
+fn bad_displays_and_rank_counts_are_refused() {
+    let w = World::new();
+    let scene = w.path("scene.toml");
+    let out = w.path("o");
+    // more back ends than projectors
+    let o = mpirun(6, &w.render_args(&out, &scene), &[]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("5 back-end ranks but only 4 projectors"),
+        "{}",
+        text(&o)
+    );
+    // a projector pinned to a rank that does not exist
+    let p = w.path("wall/projectors/p02.toml");
+    let orig = std::fs::read_to_string(&p).unwrap();
+    std::fs::write(&p, format!("{orig}rank = 7\n")).unwrap();
+    let o = mpirun(3, &w.render_args(&out, &scene), &[]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("projector 'p02': rank 7 does not exist"),
+        "{}",
+        text(&o)
+    );
+    // duplicate ids
+    std::fs::write(&p, orig.replace("\"p02\"", "\"p01\"")).unwrap();
+    let o = run(&w.render_args(&out, &scene));
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("p02.toml") && text(&o).contains("'p01'"),
+        "{}",
+        text(&o)
+    );
+    std::fs::write(&p, &orig).unwrap();
+    // a missing projector file in a list
+    std::fs::write(
+        w.path("list.toml"),
+        "[screen]\nsize = [1.6, 0.9]\npixel_size = 0.03\n[observer]\nposition = [0, 0, 2]\nprojectors = [\"wall/projectors/p00.toml\", \"wall/projectors/nope.toml\"]\n",
+    )
+    .unwrap();
+    let mut args = w.render_args(&out, &scene);
+    let l = w.path("list.toml");
+    args.extend(["--display", s(&l)]);
+    let o = run(&args);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("nope.toml"), "{}", text(&o));
+}
+
+#[test]
+fn a_dead_back_end_ends_the_run_naming_it() {
+    let w = World::new();
+    let scene = w.path("scene.toml");
+    let out = w.path("dead");
+    let start = std::time::Instant::now();
+    let o = mpirun(
+        4,
+        &w.render_args(&out, &scene),
+        &[("PARALLAX_FAULT", "exit:2:2")],
+    );
+    assert!(!o.status.success(), "{}", text(&o));
+    assert!(start.elapsed() < Duration::from_secs(100), "no hang");
+    let t = text(&o);
+    // the launcher names the process that died: rank 2 ("[[job,1],2]")
+    assert!(t.contains(",2]") && t.contains("70"), "{t}");
+    // frames before the failure were written
+    assert!(out.join("frame_00001/p00.png").exists());
+}
+
+#[test]
+fn the_72_projector_wall_runs_with_4_back_ends() {
+    let w = World::new();
+    let wall = w.path("wall72");
+    let o = run(&[
+        "display-gen",
+        "--projectors",
+        "72",
+        "--resolution",
+        "32x18",
+        "--pixel-size",
+        "0.05",
+        "-o",
+        s(&wall),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let scene = w.path("scene72.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("scene.toml"))
+            .unwrap()
+            .replace("wall/display.toml", "wall72/display.toml"),
+    )
+    .unwrap();
+    let out = w.path("out72");
+    let o = mpirun(
+        5,
+        &[
+            "render",
+            "--scene",
+            s(&scene),
+            "--frames",
+            "2",
+            "--sync",
+            "--out",
+            s(&out),
+        ],
+        &[],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let n = std::fs::read_dir(out.join("frame_00001")).unwrap().count();
+    assert_eq!(n, 72);
+    let stats = std::fs::read_to_string(out.join("stats.jsonl")).unwrap();
+    let frame1: Vec<serde_json::Value> = stats
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .filter(|v: &serde_json::Value| v["frame"] == 1)
+        .collect();
+    assert_eq!(frame1.len(), 4);
+    assert!(frame1.iter().all(|v| v["views"] == 18));
+}
