@@ -76,8 +76,12 @@ enum Command {
         /// Display file (default: the scene's `display`).
         #[arg(long)]
         display: Option<PathBuf>,
-        #[arg(long, default_value_t = 1)]
+        /// Frames to render (default: the script's length, or 1).
+        #[arg(long, default_value_t = 0)]
         frames: u64,
+        /// Interaction script (keyframes of placement, observer, η, transfer function).
+        #[arg(long)]
+        script: Option<PathBuf>,
         /// Output folder: DIR/frame_NNNNN/<projector>.png, DIR/stats.jsonl
         #[arg(long)]
         out: Option<PathBuf>,
@@ -235,6 +239,7 @@ fn run(cli: Cli) -> Result<()> {
             scene,
             display,
             frames,
+            script,
             out,
             float,
             sync,
@@ -247,6 +252,7 @@ fn run(cli: Cli) -> Result<()> {
                 out: out.clone(),
                 float,
                 sync_io: sync,
+                script,
                 verbose: true,
             };
             let coordinator = if parallax_frontend::cluster::launched_by_mpi() {

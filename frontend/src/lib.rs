@@ -4,11 +4,13 @@
 //! swap-locked) and writes them to `stats.jsonl`.
 
 pub mod cluster;
+pub mod script;
 
 use anyhow::{bail, Context, Result};
 use parallax_common::config::{Display, Scene};
 use parallax_common::protocol::{FrameState, FrameStats, ToBackend, Transport};
 use parallax_common::tf::TransferFunction;
+use script::Script;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -17,10 +19,14 @@ pub struct RunOptions {
     pub scene: PathBuf,
     /// Overrides the scene's display.
     pub display: Option<PathBuf>,
+    /// Frames to render (0: the script's length, or 1 without a script).
     pub frames: u64,
     pub out: Option<PathBuf>,
     pub float: bool,
     pub sync_io: bool,
+    /// An interaction script (keyframes); its length sets the frame count
+    /// unless `frames` is given.
+    pub script: Option<PathBuf>,
     /// Print a line per frame.
     pub verbose: bool,
 }
@@ -29,6 +35,22 @@ pub struct RunOptions {
 #[derive(Debug, Default)]
 pub struct RunSummary {
     pub frames: Vec<Vec<FrameStats>>,
+    /// Per frame: wall time on the front end from broadcast to the last
+    /// reply (ms), and the bytes of the broadcast FrameState message.
+    pub wall_ms: Vec<f64>,
+    pub state_bytes: Vec<usize>,
+}
+
+impl RunSummary {
+    /// Per frame: front-end wall time not spent inside the slowest back
+    /// end's frame — what coordination (broadcast, gather, swap lock) costs.
+    pub fn coordination_ms(&self) -> Vec<f64> {
+        self.frames
+            .iter()
+            .zip(&self.wall_ms)
+            .map(|(st, w)| (w - st.iter().map(|s| s.total_ms).fold(0.0, f64::max)).max(0.0))
+            .collect()
+    }
 }
 
 /// The display a scene renders to.
@@ -72,18 +94,56 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         sync_io: opts.sync_io,
     })?;
     transport.broadcast(&ToBackend::TransferFunction { version: 1, tf })?;
+    let script = opts.script.as_deref().map(Script::load).transpose()?;
+    let frames = match (opts.frames, &script) {
+        (0, Some(s)) => s.frames,
+        (0, None) => 1,
+        (n, _) => n,
+    };
     let mut summary = RunSummary::default();
-    for frame in 0..opts.frames {
-        let state = FrameState {
+    let mut tf_version = 1u64;
+    let mut tf_switch: Option<usize> = None;
+    for frame in 0..frames {
+        let mut state = FrameState {
             frame,
             placement: scene.placement,
             observer: display.observer.position,
             eta: scene.render.eta,
             render: scene.render.clone(),
-            tf_version: 1,
+            tf_version,
         };
-        transport.broadcast(&ToBackend::Frame(state))?;
+        if let Some(sc) = &script {
+            let st = sc.at(
+                frame,
+                &scene.placement,
+                display.observer.position,
+                scene.render.eta,
+            );
+            state.placement = st.placement;
+            state.observer = st.observer;
+            state.eta = st.eta;
+            // A transfer function is sent when it changes, not every frame.
+            if let Some((i, path)) = st.tf {
+                if tf_switch != Some(i) {
+                    tf_switch = Some(i);
+                    tf_version += 1;
+                    let tf = TransferFunction::load(&path)?;
+                    transport.broadcast(&ToBackend::TransferFunction {
+                        version: tf_version,
+                        tf,
+                    })?;
+                    state.tf_version = tf_version;
+                }
+            }
+        }
+        let start = std::time::Instant::now();
+        let msg = ToBackend::Frame(state);
+        summary
+            .state_bytes
+            .push(parallax_common::protocol::encode(&msg).len());
+        transport.broadcast(&msg)?;
         let stats = transport.gather()?;
+        summary.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
         if let Some(bad) = stats.iter().find(|s| s.error.is_some()) {
             bail!(
                 "back end {} failed: {}",
@@ -98,18 +158,35 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             }
         }
         if opts.verbose {
-            println!("{}", frame_line(frame, &stats));
+            println!(
+                "{}",
+                frame_line(frame, &stats, *summary.wall_ms.last().unwrap())
+            );
         }
         summary.frames.push(stats);
     }
     if let Some(mut f) = stats_file {
         f.flush()?;
     }
+    if opts.verbose && !summary.wall_ms.is_empty() {
+        let n = summary.wall_ms.len() as f64;
+        let wall = summary.wall_ms.iter().sum::<f64>() / n;
+        let coord = summary.coordination_ms().iter().sum::<f64>() / n;
+        println!(
+            "{} frames: {:.1} ms per frame on average, coordination {:.2} ms ({:.1}%), FrameState {} bytes",
+            summary.wall_ms.len(),
+            wall,
+            coord,
+            100.0 * coord / wall.max(1e-9),
+            summary.state_bytes.iter().max().unwrap()
+        );
+    }
     Ok(summary)
 }
 
-/// One line per frame: the slowest back end and the bricks per back end.
-pub fn frame_line(frame: u64, stats: &[FrameStats]) -> String {
+/// One line per frame: wall time, the slowest back end, the bricks per back
+/// end (G10 §6 reports 1549 average / 2087 max).
+pub fn frame_line(frame: u64, stats: &[FrameStats], wall_ms: f64) -> String {
     let slowest = stats
         .iter()
         .max_by(|a, b| a.total_ms.total_cmp(&b.total_ms))
@@ -117,9 +194,9 @@ pub fn frame_line(frame: u64, stats: &[FrameStats]) -> String {
     let bricks: Vec<u64> = stats.iter().map(|s| s.cut_leaves_with_data).collect();
     let avg = bricks.iter().sum::<u64>() as f64 / bricks.len() as f64;
     format!(
-        "frame {frame:>5}: {:>8.1} ms (slowest rank {}), bricks per rank avg {avg:.0} max {}, uploaded {}, read {:.1} MB{}",
-        slowest.total_ms,
+        "frame {frame:>5}: {wall_ms:>8.1} ms (slowest rank {} {:.1} ms), bricks per rank avg {avg:.0} max {}, uploaded {}, read {:.1} MB{}",
         slowest.rank,
+        slowest.total_ms,
         bricks.iter().max().unwrap(),
         stats.iter().map(|s| s.uploaded).sum::<u64>(),
         stats.iter().map(|s| s.bytes_read).sum::<u64>() as f64 / 1e6,
