@@ -79,6 +79,13 @@ fn handle(
             let mine = assignment[link.rank() as usize - 1].clone();
             let mut renderer = Renderer::new(&scene.volume, &scene.render)?;
             renderer.sync_io = sync_io;
+            let screen = &display.screen;
+            renderer.set_lightfield((screen.angular_accuracy_deg > 0.0).then_some(
+                crate::loader::LightField {
+                    pixel_size: screen.pixel_size,
+                    angular_accuracy_deg: screen.angular_accuracy_deg,
+                },
+            ));
             *setup = Some(Setup {
                 display,
                 mine,

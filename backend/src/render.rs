@@ -96,6 +96,12 @@ impl Renderer {
         })
     }
 
+    /// The light field display this renderer's η > 0 views are shown on
+    /// (their level of detail follows s(z), G10 §4).
+    pub fn set_lightfield(&mut self, lightfield: Option<crate::loader::LightField>) {
+        self.loader.set_lightfield(lightfield);
+    }
+
     pub fn adapter(&self) -> &wgpu::AdapterInfo {
         &self.gpu.info
     }

@@ -48,6 +48,22 @@ impl Geometry {
     }
 }
 
+/// A light field display's spatial resolution (G10 §4): s(z) = s0 +
+/// 2|z|·tan(Φ/2) at distance |z| from the screen plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightField {
+    /// s0: the pixel size on the screen (m).
+    pub pixel_size: f64,
+    /// Φ: the screen's angular accuracy (degrees).
+    pub angular_accuracy_deg: f64,
+}
+
+impl LightField {
+    pub fn resolution_at(&self, z: f64) -> f64 {
+        self.pixel_size + 2.0 * z.abs() * (self.angular_accuracy_deg.to_radians() / 2.0).tan()
+    }
+}
+
 /// One view, prepared for a frame.
 #[derive(Clone, Debug)]
 struct ViewGeom {
@@ -62,6 +78,8 @@ struct ViewGeom {
     /// observer through the view's screen region; `None` = no culling (η > 0,
     /// or a degenerate view).
     planes: Option<[DVec3; 4]>,
+    /// A light field view (η > 0): its detail follows s(z), not its pixels.
+    parallax: bool,
 }
 
 /// What refinement needs to know about a node this frame.
@@ -82,6 +100,7 @@ pub(crate) struct FrameGeometry {
     scale: f64,
     views: Vec<ViewGeom>,
     any_planes: bool,
+    lightfield: Option<LightField>,
 }
 
 impl FrameGeometry {
@@ -102,6 +121,7 @@ impl FrameGeometry {
                     } else {
                         None
                     },
+                    parallax: v.eta != 0.0,
                 }
             })
             .collect();
@@ -112,7 +132,15 @@ impl FrameGeometry {
             scale,
             views,
             any_planes,
+            lightfield: None,
         }
+    }
+
+    /// Views with η > 0 take their level of detail from the display's
+    /// depth-dependent resolution (G10 §4).
+    pub fn with_lightfield(mut self, lightfield: Option<LightField>) -> Self {
+        self.lightfield = lightfield;
+        self
     }
 
     /// Projected voxel size and frustum status of a node.
@@ -129,14 +157,35 @@ impl FrameGeometry {
     pub fn assess(&self, key: NodeKey) -> Assessment {
         let (lo, hi) = self.geom.node_box(key);
         let voxel_m = self.geom.voxel_len(key.level as u32) * self.scale;
-        let corners = self.any_planes.then(|| self.corners(lo, hi));
+        let lf = self
+            .lightfield
+            .filter(|_| self.views.iter().any(|v| v.parallax));
+        let corners = (self.any_planes || lf.is_some()).then(|| self.corners(lo, hi));
+        // Light field: the display resolves s(z) at the node's depth closest
+        // to the screen plane (0 where the node straddles it).
+        let lf_pixels = lf.map(|lf| {
+            let c = corners.as_ref().expect("corners computed for light fields");
+            let (zmin, zmax) = c
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+                    (a.min(p.z), b.max(p.z))
+                });
+            let z = if zmin <= 0.0 && zmax >= 0.0 {
+                0.0
+            } else {
+                zmin.abs().min(zmax.abs())
+            };
+            voxel_m / lf.resolution_at(z)
+        });
         let mut best_seen = f64::NEG_INFINITY;
         let mut best_any = f64::NEG_INFINITY;
         let mut seen = false;
         for v in &self.views {
             let closest = v.observer_vol.clamp(lo, hi);
             let dist = (closest - v.observer_vol).length() * self.scale;
-            let px = if dist <= TOUCHING_M {
+            let px = if let (true, Some(p)) = (v.parallax, lf_pixels) {
+                p
+            } else if dist <= TOUCHING_M {
                 f64::INFINITY
             } else if v.pixel_m > 0.0 {
                 voxel_m * v.screen_dist / (dist * v.pixel_m)
@@ -233,6 +282,43 @@ mod tests {
         assert_eq!(hi, DVec3::new(32.0, 48.0, 64.0));
         assert_eq!(g.voxel_len(3), 1.0);
         assert_eq!(g.voxel_len(0), 8.0);
+    }
+
+    #[test]
+    fn light_field_views_follow_the_display_resolution() {
+        // G10 §4: s(z) = s0 + 2|z|·tan(Φ/2). A level-3 node (voxel 0.5 data
+        // units) of a box placed 20 cm in front of the screen.
+        let g = geom();
+        let pl = Placement {
+            center: [0.0, 0.0, 0.35],
+            rotation_deg: [0.0, 0.0, 0.0],
+            size: 0.3,
+        };
+        let mut v = View::window([64, 64], [1.6, 0.9], [0.0, 0.0, 2.0]);
+        v.eta = 1.0;
+        let lf = LightField {
+            pixel_size: 0.0015,
+            angular_accuracy_deg: 0.8,
+        };
+        let f = FrameGeometry::new(&g, &[v], &pl).with_lightfield(Some(lf));
+        // the box spans z = 0.35 ± 0.15: closest to the screen at z = 0.2
+        let key = NodeKey::new(3, 0, 0, 0);
+        let voxel_m = 0.5 * 0.3 / 64.0;
+        // node (0,0,0) lies at the box's back: z = 0.2 … 0.2375
+        let want = voxel_m / (0.0015 + 2.0 * 0.2 * 0.4f64.to_radians().tan());
+        let got = f.assess(key).pixels;
+        assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
+        // without the light field, the same view uses its pixel grid
+        let plain = FrameGeometry::new(&g, &[v], &pl).assess(key).pixels;
+        assert!((plain - want).abs() > 0.1 * want);
+        // a node straddling the screen plane gets s0
+        let pl0 = Placement {
+            center: [0.0, 0.0, 0.0],
+            ..pl
+        };
+        let f0 = FrameGeometry::new(&g, &[v], &pl0).with_lightfield(Some(lf));
+        let root_voxel = 4.0 * 0.3 / 64.0;
+        assert!((f0.assess(NodeKey::root()).pixels - root_voxel / 0.0015).abs() < 1e-9);
     }
 
     #[test]

@@ -33,6 +33,7 @@ mod ranges;
 use crate::index::{CutNode, SpatialIndex, MAX_INDEX_NODES, NO_SLOT};
 use cache::{ByteLru, SlotPool};
 use feedback::Visibility;
+pub use geometry::LightField;
 use geometry::{FrameGeometry, Geometry};
 use io::{IoPool, Landed};
 use parallax_common::camera::{Placement, View};
@@ -217,9 +218,17 @@ pub struct Loader {
     failed: HashSet<NodeKey>,
     errors: Vec<String>,
     bytes_read: u64,
+    lightfield: Option<LightField>,
 }
 
 impl Loader {
+    /// The light field display the η > 0 views are shown on: their level
+    /// of detail then follows the display's depth-dependent resolution
+    /// s(z) = s0 + 2|z|·tan(Φ/2) (G10 §4) instead of the pixel grid.
+    pub fn set_lightfield(&mut self, lightfield: Option<LightField>) {
+        self.lightfield = lightfield;
+    }
+
     /// Starts the loader and its I/O threads over an open database.
     pub fn new(db: Arc<OctreeDb>, cfg: LoaderConfig) -> Self {
         let layout = *db.layout();
@@ -242,6 +251,7 @@ impl Loader {
             failed: HashSet::new(),
             errors: Vec::new(),
             bytes_read: 0,
+            lightfield: None,
         }
     }
 
@@ -277,7 +287,8 @@ impl Loader {
             }
             _ => Visibility::none(),
         };
-        let frame = FrameGeometry::new(&self.geom, views, placement);
+        let frame =
+            FrameGeometry::new(&self.geom, views, placement).with_lightfield(self.lightfield);
         self.gpu.begin_frame();
         let mut b = Build::default();
         b.stats.adequate = true;
