@@ -141,6 +141,43 @@ mod tests {
     }
 
     #[test]
+    fn degenerate_geometry_gives_finite_rays() {
+        // η outside [0, 1] extrapolates Eq. 1 (depth exaggeration or
+        // inversion), a projector on the screen plane falls back to η = 0,
+        // an observer on the screen point gets a fixed direction: never NaN.
+        for eta in [-3.0, -1.0, 0.0, 0.5, 1.0, 2.0, 1e6] {
+            for eye_z in [-2.0, 0.0, 1e-15, 3.0] {
+                let v = View {
+                    resolution: [5, 3],
+                    region: [-0.5, -0.5, 1.0, 1.0],
+                    eye: [0.3, 0.1, eye_z],
+                    observer: [0.0, 0.0, 2.0],
+                    eta,
+                };
+                for i in 0..5 {
+                    for j in 0..3 {
+                        let (o, d) = v.ray(i, j);
+                        assert!(
+                            o.is_finite() && d.is_finite(),
+                            "η {eta}, E_z {eye_z}: {o:?} {d:?}"
+                        );
+                        assert!((d.length() - 1.0).abs() < 1e-12);
+                    }
+                }
+            }
+        }
+        let on_screen = View {
+            resolution: [1, 1],
+            region: [-0.5, -0.5, 1.0, 1.0],
+            eye: [0.0, 0.0, 0.0],
+            observer: [0.0, 0.0, 0.0],
+            eta: 0.0,
+        };
+        let (o, d) = on_screen.ray(0, 0);
+        assert!(o.is_finite() && d.is_finite());
+    }
+
+    #[test]
     fn placement_round_trip() {
         let pl = Placement {
             center: [0.1, -0.2, 0.3],

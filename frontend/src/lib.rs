@@ -74,18 +74,21 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
     let display = load_display(&scene, opts.display.as_ref())?;
     display.assignment(transport.backends())?;
     let tf = TransferFunction::load(&scene.transfer_function)?;
-    let mut stats_file = match &opts.out {
-        Some(dir) => {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("{}: cannot create", dir.display()))?;
-            let p = dir.join("stats.jsonl");
-            Some(std::io::BufWriter::new(
-                std::fs::File::create(&p)
-                    .with_context(|| format!("{}: cannot create", p.display()))?,
-            ))
-        }
-        None => None,
+    let create = |name: &str| -> Result<Option<std::io::BufWriter<std::fs::File>>> {
+        let Some(dir) = &opts.out else {
+            return Ok(None);
+        };
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        let p = dir.join(name);
+        let f =
+            std::fs::File::create(&p).with_context(|| format!("{}: cannot create", p.display()))?;
+        Ok(Some(std::io::BufWriter::new(f)))
     };
+    // stats.jsonl: each back end's FrameStats; frontend.jsonl: the
+    // coordinator's own figures per frame.
+    let mut stats_file = create("stats.jsonl")?;
+    let mut frontend_file = create("frontend.jsonl")?;
     transport.broadcast(&ToBackend::Setup {
         scene: scene.clone(),
         display: display.clone(),
@@ -157,16 +160,28 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
                 f.write_all(b"\n")?;
             }
         }
+        let wall = *summary.wall_ms.last().unwrap();
+        if let Some(f) = frontend_file.as_mut() {
+            let slowest = stats.iter().map(|s| s.total_ms).fold(0.0, f64::max);
+            let line = serde_json::json!({
+                "frame": frame,
+                "wall_ms": wall,
+                "slowest_backend_ms": slowest,
+                "coordination_ms": (wall - slowest).max(0.0),
+                "state_bytes": summary.state_bytes.last().unwrap(),
+                "backends": stats.len(),
+            });
+            serde_json::to_writer(&mut *f, &line)?;
+            f.write_all(b"\n")?;
+        }
         if opts.verbose {
-            println!(
-                "{}",
-                frame_line(frame, &stats, *summary.wall_ms.last().unwrap())
-            );
+            println!("{}", frame_line(frame, &stats, wall));
         }
         summary.frames.push(stats);
     }
-    if let Some(mut f) = stats_file {
-        f.flush()?;
+    for f in [stats_file, frontend_file].into_iter().flatten() {
+        f.into_inner()
+            .map_err(|e| anyhow::anyhow!("writing stats: {}", e.error()))?;
     }
     if opts.verbose && !summary.wall_ms.is_empty() {
         let n = summary.wall_ms.len() as f64;
