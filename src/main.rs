@@ -145,6 +145,51 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
     },
+    /// What an eye sees on a light field display, from the projector images
+    /// of one rendered frame (several --eye: a strip, left to right).
+    Simulate {
+        #[arg(long)]
+        display: PathBuf,
+        /// A frame folder written by `render` (DIR/frame_NNNNN).
+        #[arg(long)]
+        frames: PathBuf,
+        /// Eye position x,y,z (m); repeat for a strip.
+        #[arg(long, required = true, allow_hyphen_values = true)]
+        eye: Vec<String>,
+        /// Sweep: this many eyes evenly from the first --eye to the second.
+        #[arg(long)]
+        sweep: Option<usize>,
+        /// Output resolution WxH (default: screen size / pixel size, capped).
+        #[arg(long)]
+        resolution: Option<String>,
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// The scene as a Looking Glass quilt (views left to right from the
+    /// bottom-left tile, `_qs{cols}x{rows}a{aspect}` in the file name).
+    Quilt {
+        #[arg(long)]
+        scene: PathBuf,
+        #[arg(long, default_value_t = 8)]
+        cols: u32,
+        #[arg(long, default_value_t = 6)]
+        rows: u32,
+        /// Tile size WxH.
+        #[arg(long, default_value = "210x280")]
+        tile: String,
+        /// The device's view cone (degrees).
+        #[arg(long, default_value_t = 40.0)]
+        cone: f64,
+        /// Height of the focal plane rectangle (m); its width follows the tile aspect.
+        #[arg(long, default_value_t = 0.3)]
+        screen_height: f64,
+        /// Viewing distance (m).
+        #[arg(long, default_value_t = 0.8)]
+        distance: f64,
+        /// Output: a .png path or a folder (the layout suffix is added).
+        #[arg(short, long)]
+        output: PathBuf,
+    },
     /// Describe a database; --verify decodes and checks every brick.
     Info {
         database: PathBuf,
@@ -327,6 +372,83 @@ fn run(cli: Cli) -> Result<()> {
                 "wrote {}/display.toml and {projectors} projector files",
                 output.display()
             );
+        }
+        Command::Simulate {
+            display,
+            frames,
+            eye,
+            sweep,
+            resolution,
+            output,
+        } => {
+            use parallax_backend::simulate as sim;
+            let disp = parallax_common::config::Display::load(&display)?;
+            let images = sim::load_frame(&disp, &frames)?;
+            let mut eyes = eye
+                .iter()
+                .map(|e| sim::parse_eye(e))
+                .collect::<Result<Vec<_>>>()?;
+            if let Some(n) = sweep {
+                if eyes.len() != 2 || n < 2 {
+                    bail!("--sweep N needs exactly two --eye positions (from, to) and N ≥ 2");
+                }
+                eyes = sim::sweep(eyes[0], eyes[1], n);
+            }
+            let res = match resolution {
+                Some(r) => parse_pair::<u32>(&r, "--resolution")?,
+                None => sim::default_resolution(&disp, sim::DEFAULT_MAX_SIDE),
+            };
+            let (w, h, px) = sim::strip(&disp, &images, &eyes, res)?;
+            parallax_backend::output::write_png(&output, w, h, &px)?;
+            println!(
+                "wrote {} ({} eye{}, {w}×{h})",
+                output.display(),
+                eyes.len(),
+                if eyes.len() > 1 { "s" } else { "" }
+            );
+        }
+        Command::Quilt {
+            scene,
+            cols,
+            rows,
+            tile,
+            cone,
+            screen_height,
+            distance,
+            output,
+        } => {
+            use parallax_backend::quilt;
+            let tile = parse_pair::<u32>(&tile, "--tile")?;
+            if cols == 0 || rows == 0 || tile.contains(&0) {
+                bail!("--cols, --rows and --tile must be at least 1");
+            }
+            let sc = parallax_common::config::Scene::load(&scene)?;
+            let tf = parallax_common::tf::TransferFunction::load(&sc.transfer_function)?;
+            let aspect = quilt::tile_aspect(tile);
+            let views = quilt::quilt_views(
+                [screen_height * aspect, screen_height],
+                distance,
+                cone,
+                cols,
+                rows,
+                tile,
+            );
+            let mut r = parallax_backend::render::Renderer::new(&sc.volume, &sc.render)?;
+            r.set_transfer_function(1, &tf)?;
+            let f = r.converge(&sc.placement, &views, &sc.render, 64)?;
+            let img = quilt::assemble(cols, rows, tile, &f.images)?;
+            let path = if output.extension().is_some() {
+                quilt::quilt_path(&output, cols, rows, aspect)
+            } else {
+                std::fs::create_dir_all(&output)?;
+                let stem = scene
+                    .file_stem()
+                    .and_then(|s| s.to_str())
+                    .unwrap_or("quilt");
+                output.join(quilt::quilt_file_name(stem, cols, rows, aspect))
+            };
+            parallax_backend::output::write_png(&path, cols * tile[0], rows * tile[1], &img)?;
+            println!("wrote {}", path.display());
         }
         Command::Info { database, verify } => {
             let db = OctreeDb::open(&database)?;
