@@ -290,6 +290,6 @@ mod tests {
         let idx = SpatialIndex::build(&cut, (0.0, 1.0)).unwrap();
         let (lo, hi) = idx.nodes[0].range((0.0, 1.0));
         assert!(lo <= 0.123 && lo > 0.123 - 2e-5);
-        assert!(hi >= 0.456 && hi < 0.456 + 2e-5);
+        assert!((0.456..0.456 + 2e-5).contains(&hi));
     }
 }

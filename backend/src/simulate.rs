@@ -223,7 +223,7 @@ fn column_weights(beams: &[Beam], qx: f64, eye: [f64; 3], phi: f64) -> Vec<(usiz
         let e = b.e;
         // The screen transmits: the beam E→Q continues on the far side of
         // the screen from E, so only an eye strictly on that side sees it.
-        if !(az * e[2] < 0.0) {
+        if az * e[2] >= 0.0 || (az * e[2]).is_nan() {
             continue;
         }
         // Outside the projector's columns (rows are checked per pixel).

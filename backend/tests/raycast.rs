@@ -160,7 +160,7 @@ fn full_detail(filtering: Filtering, bound: f64) {
             let diff: Vec<[f32; 4]> = out.images[0]
                 .iter()
                 .zip(&w)
-                .map(|(a, b)| std::array::from_fn(|c| ((a[c] - b[c]).abs() * 10.0)))
+                .map(|(a, b)| std::array::from_fn(|c| (a[c] - b[c]).abs() * 10.0))
                 .collect();
             parallax_backend::output::write_png(
                 &d.join(format!("{kind:?}-gpu.png")),

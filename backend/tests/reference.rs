@@ -134,8 +134,8 @@ fn brute(vol: &Volume, f: &TransferFunction, o: DVec3, d: DVec3, steps: usize) -
         let op = f.eval(vol.sample((o + d * t).into()));
         let a = -(-op.tau * h).exp_m1();
         let w = if op.tau > 0.0 { a / op.tau } else { h };
-        for ch in 0..3 {
-            c[ch] += (-depth).exp() * op.emission[ch] * w;
+        for (cc, e) in c.iter_mut().zip(op.emission) {
+            *cc += (-depth).exp() * e * w;
         }
         depth += op.tau * h;
     }

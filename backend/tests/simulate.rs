@@ -332,8 +332,8 @@ fn without_parallax_every_projector_shows_the_same_image() {
                         + at(2 * i + 1, 2 * j + 1)[c])
                         / 4.0
                 });
-                for c in 0..4 {
-                    worst2 = worst2.max((s2.image[k][c] - want[c]).abs());
+                for (got, w) in s2.image[k].iter().zip(want) {
+                    worst2 = worst2.max((got - w).abs());
                 }
             }
         }
@@ -395,7 +395,7 @@ fn the_screen_blends_neighbouring_beams_with_a_tent_of_width_phi() {
     let centre = |img: &[[f32; 4]]| img[9 + 4];
     for wx in [0.0, 0.2, 0.1, -0.05, 0.3] {
         let img = simulate(&d, &images, [wx, 0.0, 1.0], res).unwrap();
-        let to_eye = (wx as f64).atan(); // angle of Q→W at Q = 0
+        let to_eye = wx.atan(); // angle of Q→W at Q = 0
         let w0 = (1.0 - (to_eye - spacing / 2.0).abs() / spacing).max(0.0);
         let w1 = (1.0 - (to_eye + spacing / 2.0).abs() / spacing).max(0.0);
         let want_red = w0 / (w0 + w1);

@@ -324,7 +324,7 @@ impl Raycaster {
             mapped_at_creation: false,
         });
         let img_size = pixels as u64 * 16;
-        if img_size > dev.limits().max_storage_buffer_binding_size as u64 {
+        if img_size > dev.limits().max_storage_buffer_binding_size {
             bail!("render: {pixels} pixels in one frame exceed the GPU's storage binding limit");
         }
         let image_buf = dev.create_buffer(&wgpu::BufferDescriptor {

@@ -171,6 +171,11 @@ impl Quantiser {
     }
 }
 
+/// The checksum stored with every brick (CRC-32 of its stored bytes).
+pub fn checksum(bytes: &[u8]) -> u32 {
+    crc32fast::hash(bytes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -239,9 +244,4 @@ mod tests {
             Err(DecodeError::Size { .. })
         ));
     }
-}
-
-/// The checksum stored with every brick (CRC-32 of its stored bytes).
-pub fn checksum(bytes: &[u8]) -> u32 {
-    crc32fast::hash(bytes)
 }
