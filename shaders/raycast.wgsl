@@ -49,7 +49,7 @@ struct GpuFrame {
     tf: vec4<f32>,        // table vmin, bin width, bins, 0
     render: vec4<f32>,    // step factor, early-termination opacity, probe offset (root units: 1% of a source voxel), 0
     light: vec4<f32>,     // Phong ka, kd, ks, shininess
-    counts: vec4<u32>,    // B, leaf level L, table levels, table channel stride
+    counts: vec4<u32>,    // B, leaf level L, table levels, running-integral offset (0: none)
     pool: vec4<u32>,      // slots per axis x, y, z; stored brick side B + 2·OVERLAP
     tf_offsets: array<vec4<u32>, 8>,  // pyramid level offsets (32)
 }
@@ -66,7 +66,8 @@ struct GpuFrame {
 @group(0) @binding(8) var pool_sampler: sampler;
 
 // ---------------------------------------------------------------------------
-// Pre-integration (G10 §4 Eq. 2) over the sum pyramid of common/src/tf:
+// Pre-integration (G10 §4 Eq. 2) over the sum pyramid of common/src/tf
+// (or, where the table allows, its running integral as an f32 pair):
 // the average of (τ, k̃r, k̃g, k̃b) over the data segment [a, b].
 
 fn tf_offset(k: u32) -> u32 {
@@ -102,6 +103,15 @@ fn segment_average(sa: f32, sb: f32) -> vec4<f32> {
     let jb = min(u32(ub), n);
     var sum = (f32(ja + 1u) - ua) * 0.5 * (lerp4(ua) + node4(ja + 1u));
     var lo = ja + 1u;
+    let prefix = frame.counts.w;
+    if (prefix != 0u) {
+        // Whole bins [ja+1, jb) by the running integral, an f32 pair per
+        // node: (hi_b − hi_a) + (lo_b − lo_a); exact zero for no bins.
+        let a = prefix + 2u * lo;
+        let b = prefix + 2u * jb;
+        sum = sum + (table[b] - table[a]) + (table[b + 1u] - table[a + 1u]);
+        lo = jb;
+    }
     let top = frame.counts.z - 1u;
     // Whole bins as aligned dyadic blocks: every term ≥ 0, nothing cancels.
     while (lo < jb) {

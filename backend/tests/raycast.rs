@@ -267,3 +267,49 @@ fn traversal_covers_every_path_exactly_once() {
         assert!(worst < 1e-4, "rotation {rot:?}: {worst}");
     }
 }
+
+/// The GPU sums whole bins by the running integral where the transfer
+/// function's range allows and by the dyadic pyramid otherwise; both match
+/// the reference. The second transfer function spans 1e-6…0.3 per unit,
+/// which forces the pyramid.
+#[test]
+fn both_table_paths_match_the_reference() {
+    let gpu = Gpu::new().unwrap();
+    let mut rc = Raycaster::new(&gpu, true, Filtering::Exact).unwrap();
+    let s = setup(SynthKind::Shells, 40, BrickEncoding::F32);
+    let (cut, pool) = full_cut(&gpu, &s.db, true);
+    let range = (s.db.summary.value_min, s.db.summary.value_max);
+    let index = SpatialIndex::build(&cut, range).unwrap();
+    let sc = scene(&s.db);
+    let view = View::window([40, 32], [0.4, 0.32], [0.02, 0.01, 0.8]);
+    let extreme = TransferFunction::from_points(vec![
+        ControlPoint::new(0.0, [0.2, 0.2, 0.2], 1e-6),
+        ControlPoint::new(90.0, [0.2, 0.2, 0.2], 1e-6),
+        ControlPoint::new(160.0, [1.0, 0.3, 0.1], 0.08),
+        ControlPoint::new(255.0, [0.5, 0.7, 1.0], 0.3),
+    ])
+    .unwrap();
+    for (f, prefix) in [(tf(), true), (extreme, false)] {
+        let (lo, hi) = (range.0 as f64, range.1 as f64);
+        let table =
+            PreintTable::new(&f, lo, hi, PreintTable::suggested_bins(lo, hi, true)).unwrap();
+        let gtf = TfTable::new(&gpu, &table);
+        assert_eq!(gtf.uses_running_integral(), prefix);
+        let settings = RenderSettings {
+            step_factor: 0.125,
+            early_termination: 1.0,
+            shading: false,
+        };
+        let out = rc
+            .render(&gpu, &pool, &index, &gtf, &sc, &[view], &settings)
+            .unwrap();
+        let want = reference::render(&s.vol, &f, &sc.placement, &view, Tolerance::default());
+        let (e, mx) = rmse(&out.images[0], &want);
+        let mean_a: f64 = want.iter().map(|p| p[3]).sum::<f64>() / want.len() as f64;
+        eprintln!(
+            "running integral {prefix}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}"
+        );
+        assert!(mean_a > 0.02);
+        assert!(e <= 1e-3, "running integral {prefix}: RMSE {e}");
+    }
+}

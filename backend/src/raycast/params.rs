@@ -36,7 +36,7 @@ pub struct GpuFrame {
     pub render: [f32; 4],
     /// Phong ka, kd, ks, shininess.
     pub light: [f32; 4],
-    /// B, leaf level L, table levels, table channel stride.
+    /// B, leaf level L, table levels, running-integral offset (0: none).
     pub counts: [u32; 4],
     /// slots per axis x, y, z; stored brick side.
     pub pool: [u32; 4],
