@@ -1,0 +1,744 @@
+#!/usr/bin/env python3
+"""Parallax's GPU ray caster (on whatever adapter wgpu picks: lavapipe on the
+2-core reference machine) against VTK's CPU ray caster
+vtkFixedPointVolumeRayCastMapper, on the same 512×512 view of the Colin27 MRI,
+at matched step lengths, both measured against one reference image.
+
+What a pixel means (DESIGN.md): with shading off, the premultiplied
+emission–absorption integral C = ∫ τ c exp(−∫τ) dt, A = 1 − exp(−∫τ dt) along
+the pixel's ray inside the box [0, N·s]. Every image here is compared with the
+reference as float premultiplied RGBA (RMSE over all channels and pixels, max
+abs, PSNR with peak 1), as `parallax bench` does.
+
+The reference is Parallax itself at a very small step (render.step_factor =
+0.0625, i.e. 1/16 mm, interpolation = "exact", full-precision bricks,
+accuracy = 0.01, early_termination = 1, no visibility culling). `parallax
+bench` measures that configuration at RMSE ≈ 3e-5 from the exact integral on
+this dataset (out/bench/bench.csv), far below every error compared here.
+
+VTK is set up to compute the same integral: the same camera (inverse scene
+placement), colours at every data value, per-unit-distance opacity
+α = 1 − exp(−τ·1 mm) with ScalarOpacityUnitDistance 1, trilinear
+interpolation, no shading, 2 threads. Its volume is padded with one
+replicated voxel and cropped to [0, N·s], because VTK's own domain ends at
+the outer voxel centres, half a voxel short of Parallax's box (the "voxel-
+centre box" rows show VTK as it comes). Its image is read twice: the
+mapper's own 15-bit ray-cast image (the fair comparison) and the 8-bit
+window framebuffer (what a VTK user sees). Early termination: VTK stops a
+ray at opacity 1 − 255/32768; Parallax is timed with that threshold and
+with none.
+
+Timing: Parallax's render_ms (median of the last 3 of 8 --sync frames)
+against the wall time of renWin.Render() (median of 5 after a warm-up).
+The machine is shared: every timed section waits until other processes
+have been idle for 10 s and is repeated if they took more than 0.1 core
+meanwhile (columns cores / other_cores).
+
+Run it through bench/vtk_compare.sh (installs vtk + numpy, imports the two
+databases, builds). Outputs go to out/bench-vtk/ (git-ignored) and the table
+to bench/vtk_results.csv.
+"""
+
+import argparse
+import csv
+import ctypes
+import json
+import math
+import os
+import re
+import shutil
+import statistics
+import struct
+import subprocess
+import sys
+import time
+import tomllib
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+BENCH = ROOT / "bench"
+VOLUME = Path("/usr/share/mricron/templates/ch2.nii.gz")
+W = H = 512
+SCREEN = (0.3, 0.3)          # m, centred on the origin, z = 0
+EYE = np.array([0.0, 0.0, 0.8])
+# VTK's fixed-point compositing stops a ray once the remaining transparency
+# drops below 0xff in 15-bit fixed point (vtkFixedPointVolumeRayCastHelper.h,
+# CompositeColorAndCheckEarlyTermination): opacity 1 − 255/32768.
+VTK_EARLY_TERMINATION = 1.0 - 255.0 / 32768.0
+STEPS = [0.25, 0.5, 1.0]          # matched steps (mm): ours and VTK
+EXTRA_STEPS = [2.0]               # coarser, to find equal-error pairs
+STAGES = ["refine_ms", "upload_ms", "index_ms", "render_ms", "output_ms", "total_ms"]
+
+
+def log(*a):
+    print(*a, flush=True)
+
+
+# --------------------------------------------------------------------------
+# The machine is shared (2 cores): time only when nothing else runs, and
+# measure how much CPU other processes took during each timed section.
+
+def busy_seconds():
+    """CPU seconds all cores have spent busy since boot (/proc/stat)."""
+    f = [int(x) for x in open("/proc/stat").readline().split()[1:]]
+    idle = f[3] + f[4]
+    return (sum(f[:8]) - idle) / os.sysconf("SC_CLK_TCK")
+
+
+def own_cpu(children=False):
+    t = os.times()
+    return t.children_user + t.children_system if children else t.user + t.system
+
+
+class Meter:
+    """Wall time, own CPU and other processes' CPU over a section."""
+
+    def __init__(self, children=False):
+        self.children = children
+
+    def __enter__(self):
+        self.b0, self.c0, self.t0 = busy_seconds(), own_cpu(self.children), time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        self.wall = time.perf_counter() - self.t0
+        self.cpu = own_cpu(self.children) - self.c0
+        # (/proc/stat ticks at 1/100 s: allow that much jitter.)
+        self.other = max(0.0, busy_seconds() - self.b0 - self.cpu - 0.02)
+        self.other_cores = self.other / max(self.wall, 1e-9)
+        self.cores = self.cpu / max(self.wall, 1e-9)
+
+
+def wait_idle(limit_cores=0.1, quiet_s=10.0, timeout_s=3600.0):
+    """Waits until other processes have used less than `limit_cores` over
+    `quiet_s` seconds in a row (sampled each second)."""
+    t0 = time.time()
+    warned = False
+    quiet = 0.0
+    while quiet < quiet_s:
+        with Meter() as m:
+            time.sleep(1.0)
+        if m.other_cores < limit_cores:
+            quiet += m.wall
+            continue
+        quiet = 0.0
+        if not warned:
+            log(f"    (machine busy: {m.other_cores:.2f} cores used by other processes; waiting)")
+            warned = True
+        if time.time() - t0 > timeout_s:
+            log("    WARNING: machine still busy after waiting; timing anyway")
+            return False
+    return True
+
+
+# --------------------------------------------------------------------------
+# Geometry: the scene placement (DESIGN.md "Volume space") and its inverse.
+
+def rot_x(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def rot_y(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def rot_z(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+class Placement:
+    """p (volume, mm) ↦ center + R·(size/max(N·s))·(p − N·s/2); R = Rz·Ry·Rx."""
+
+    def __init__(self, center, size, rotation_deg, extent):
+        rx, ry, rz = (math.radians(d) for d in rotation_deg)
+        self.R = rot_z(rz) @ rot_y(ry) @ rot_x(rx)
+        self.center = np.asarray(center, float)
+        self.extent = np.asarray(extent, float)
+        self.scale = size / max(extent)
+
+    def to_display(self, p):
+        return self.center + self.R @ ((np.asarray(p, float) - self.extent / 2) * self.scale)
+
+    def to_volume(self, x):
+        return self.R.T @ (np.asarray(x, float) - self.center) / self.scale + self.extent / 2
+
+    def dir_to_volume(self, d):
+        return self.R.T @ np.asarray(d, float)
+
+
+# --------------------------------------------------------------------------
+# The transfer function (DESIGN.md "Transfer function").
+
+def load_tf(path):
+    pts = tomllib.loads(Path(path).read_text())["point"]
+    pts = sorted(pts, key=lambda p: p["value"])
+    v = np.array([p["value"] for p in pts], float)
+    col = np.array([p["color"] for p in pts], float)
+    tau = np.array([p["extinction"] for p in pts], float)
+    return v, col, tau
+
+
+def tf_at(tf, x):
+    """τ(x) and c(x): piecewise linear, constant beyond the ends."""
+    v, col, tau = tf
+    t = np.interp(x, v, tau)
+    c = np.stack([np.interp(x, v, col[:, k]) for k in range(3)], axis=-1)
+    return t, c
+
+
+# --------------------------------------------------------------------------
+# Image metrics.
+
+def image_error(img, ref):
+    d = img.astype(np.float64) - ref.astype(np.float64)
+    rmse = float(np.sqrt(np.mean(d * d)))
+    return rmse, float(np.max(np.abs(d))), -20.0 * math.log10(max(rmse, 1e-12))
+
+
+def alpha_centroid(img):
+    a = img[..., 3].astype(np.float64)
+    ys, xs = np.mgrid[0:a.shape[0], 0:a.shape[1]]
+    s = a.sum()
+    return float((a * (xs + 0.5)).sum() / s), float((a * (ys + 0.5)).sum() / s)
+
+
+def best_shift(img, ref, r=2):
+    """The whole-pixel shift (dx, dy) of `img` that best matches `ref`."""
+    best = None
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            sh = np.roll(np.roll(img, dy, axis=0), dx, axis=1)
+            e = float(np.sqrt(np.mean((sh[r:-r, r:-r] - ref[r:-r, r:-r]) ** 2)))
+            if best is None or e < best[0]:
+                best = (e, dx, dy)
+    return best[1], best[2]
+
+
+def write_png(path, rgb):
+    """8-bit RGB PNG without any imaging library."""
+    h, w, _ = rgb.shape
+    raw = b"".join(b"\x00" + rgb[j].tobytes() for j in range(h))
+
+    def chunk(t, d):
+        c = struct.pack(">I", len(d)) + t + d
+        return c + struct.pack(">I", zlib.crc32(t + d) & 0xFFFFFFFF)
+
+    Path(path).write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(raw, 6))
+        + chunk(b"IEND", b"")
+    )
+
+
+def to_srgb8(img):
+    c = np.clip(img[..., :3], 0.0, 1.0)
+    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
+    return (s * 255.0 + 0.5).astype(np.uint8)
+
+
+# --------------------------------------------------------------------------
+# Parallax runs.
+
+def toml_value(v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    return json.dumps(str(v))
+
+
+def write_scene(path, base, db, render):
+    """A variant of bench/vtk_scene.toml with absolute paths."""
+    lines = [
+        "# written by bench/vtk_compare.py from bench/vtk_scene.toml",
+        f"volume = {toml_value(db)}",
+        f"transfer_function = {toml_value((BENCH / base['transfer_function']).resolve())}",
+        f"display = {toml_value((BENCH / base['display']).resolve())}",
+        "",
+        "[placement]",
+    ]
+    lines += [f"{k} = {toml_value(v)}" for k, v in base["placement"].items()]
+    lines += ["", "[render]"]
+    r = dict(base["render"])
+    r.update(render)
+    lines += [f"{k} = {toml_value(v)}" for k, v in r.items()]
+    text = "\n".join(lines) + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return text
+
+
+def run_parallax(px, name, base, db, render, out, frames, reuse, timed=True):
+    scenes = out / "scenes"
+    runs = out / "runs"
+    scene = scenes / f"{name}.toml"
+    text = write_scene(scene, base, db, render)
+    rdir = runs / name
+    last = rdir / f"frame_{frames - 1:05d}" / "window.npy"
+    stamp = rdir / "scene.toml"
+    meta = rdir / "meter.json"
+    if reuse and last.exists() and stamp.exists() and stamp.read_text() == text and meta.exists():
+        log(f"  {name}: reusing {rdir}")
+        m = json.loads(meta.read_text())
+    else:
+        cmd = [str(px), "render", "--scene", str(scene), "--float", "--sync",
+               "--frames", str(frames), "--out", str(rdir)]
+        log("  $ " + " ".join(os.path.relpath(c, ROOT) if c.startswith("/") else c for c in cmd))
+        t_start = time.time()
+        for attempt in range(1, 100):
+            if rdir.exists():
+                shutil.rmtree(rdir)
+            if timed:
+                wait_idle()
+            with Meter(children=True) as mt:
+                p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+            if p.returncode != 0:
+                sys.exit(f"parallax render failed for {name}:\n{p.stdout}\n{p.stderr}")
+            m = dict(wall_s=mt.wall, cores=mt.cores, other_cores=mt.other_cores, attempt=attempt)
+            log(f"    {frames} frames in {mt.wall:.1f} s, {mt.cores:.2f} cores busy on average, "
+                f"other processes {mt.other_cores:.2f} cores")
+            if mt.other_cores < 0.1 or not timed:
+                break
+            if time.time() - t_start > 3600:
+                log("    WARNING: no undisturbed run within an hour: keeping this one (see other_cores)")
+                break
+            log("    (disturbed by other processes: again)")
+        (rdir / "log.txt").write_text(p.stdout + p.stderr)
+        stamp.write_text(text)
+        meta.write_text(json.dumps(m))
+    img = np.load(last)
+    assert img.shape == (H, W, 4) and img.dtype == np.float32, img.shape
+    stats = [json.loads(l) for l in (rdir / "stats.jsonl").read_text().splitlines() if l.strip()]
+    stats.sort(key=lambda s: s["frame"])
+    tail = stats[-3:]
+    med = {k: statistics.median(s[k] for s in tail) for k in STAGES}
+    med["bricks"] = tail[-1]["cut_leaves_with_data"]
+    med["adequate"] = all(s["adequate"] for s in tail)
+    med["uploaded_tail"] = sum(s["uploaded"] for s in tail)
+    # Frames 0 and 1 have nothing, or only the coarse root brick, resident:
+    # the lighter one bounds the fixed per-frame cost (dispatch, image and
+    # feedback readback) from above.
+    med["light_frame_render_ms"] = min(s["render_ms"] for s in stats[:2])
+    med["cores"] = m["cores"]
+    med["other_cores"] = m["other_cores"]
+    return img, med
+
+
+# --------------------------------------------------------------------------
+# VTK.
+
+def vtk_read_volume():
+    """ch2.nii.gz through vtkNIFTIImageReader, checked against the file's own
+    bytes: the voxels must come in raw file order (x fastest), as Parallax
+    reads them (it ignores qform/sform)."""
+    import gzip
+
+    import vtk
+    from vtk.util import numpy_support as ns
+
+    reader = vtk.vtkNIFTIImageReader()
+    reader.SetFileName(str(VOLUME))
+    reader.Update()
+    img = reader.GetOutput()
+    dims = img.GetDimensions()
+    spacing = img.GetSpacing()
+    arr = ns.vtk_to_numpy(img.GetPointData().GetScalars())
+
+    raw = gzip.open(VOLUME).read()
+    ndim = struct.unpack("<8h", raw[40:56])
+    datatype = struct.unpack("<h", raw[70:72])[0]
+    vox_offset = int(struct.unpack("<f", raw[108:112])[0])
+    slope, inter = struct.unpack("<2f", raw[112:120])
+    assert datatype == 2, f"expected u8 NIfTI (datatype 2), got {datatype}"
+    n = ndim[1] * ndim[2] * ndim[3]
+    fileorder = np.frombuffer(raw[vox_offset:vox_offset + n], dtype=np.uint8)
+    assert tuple(dims) == tuple(ndim[1:4]), (dims, ndim)
+    assert np.array_equal(arr, fileorder), "vtkNIFTIImageReader reordered the voxels"
+    assert slope in (0.0, 1.0) and inter == 0.0, (slope, inter)
+    assert img.GetScalarTypeAsString() == "unsigned char"
+    m = img.GetDirectionMatrix()
+    assert all(m.GetElement(i, j) == (1.0 if i == j else 0.0) for i in range(3) for j in range(3))
+    return reader, dims, spacing, arr.reshape(dims[2], dims[1], dims[0])
+
+
+def vtk_setup(tf, placement, threads, domain, volume):
+    """One VTK pipeline. domain:
+    "box"     — Parallax's domain: the field clamped to the edge voxels inside
+                [0, N·s] (DESIGN.md "Volume space"). The volume is padded with
+                one replicated voxel on every side (so trilinear interpolation
+                is the clamped field out to the box) and cropped to the box
+                with the mapper's cropping planes.
+    "centres" — VTK as it comes: the volume ends at the outer voxel centres
+                [½s, (N−½)s], half a voxel short of the box on every face.
+    """
+    import vtk
+    from vtk.util import numpy_support as ns
+
+    reader, dims, spacing, arr = volume
+    extent = [d * s for d, s in zip(dims, spacing)]
+    if domain == "box":
+        padded = np.ascontiguousarray(np.pad(arr, 1, mode="edge"))
+        image = vtk.vtkImageData()
+        image.SetDimensions(dims[0] + 2, dims[1] + 2, dims[2] + 2)
+        image.SetSpacing(*spacing)
+        # VTK puts voxel centres at origin + i·s: the padding layer at −½s.
+        image.SetOrigin(*(-0.5 * s for s in spacing))
+        sc = ns.numpy_to_vtk(padded.ravel(), deep=1, array_type=vtk.VTK_UNSIGNED_CHAR)
+        image.GetPointData().SetScalars(sc)
+        source = vtk.vtkTrivialProducer()
+        source.SetOutput(image)
+        port = source.GetOutputPort()
+    else:
+        # VTK puts voxel centres at origin + i·s; Parallax at (i + ½)·s.
+        source = vtk.vtkImageChangeInformation()
+        source.SetInputConnection(reader.GetOutputPort())
+        source.SetOutputOrigin(*(0.5 * s for s in spacing))
+        source.Update()
+        port = source.GetOutputPort()
+
+    # Transfer function, sampled at every data value: colour linear in RGB;
+    # opacity per unit distance α = 1 − exp(−τ·1 mm) (piecewise-linear α is
+    # not piecewise-linear τ, hence the dense sampling; VTK's tables are
+    # indexed by integer data value anyway).
+    xs = np.arange(0, 256, dtype=float)
+    tau, col = tf_at(tf, xs)
+    ctf = vtk.vtkColorTransferFunction()
+    ctf.SetColorSpaceToRGB()
+    otf = vtk.vtkPiecewiseFunction()
+    for x, t, c in zip(xs, tau, col):
+        ctf.AddRGBPoint(x, *c)
+        otf.AddPoint(x, 1.0 - math.exp(-t * 1.0))
+    prop = vtk.vtkVolumeProperty()
+    prop.SetColor(ctf)
+    prop.SetScalarOpacity(otf)
+    prop.SetScalarOpacityUnitDistance(1.0)
+    prop.SetInterpolationTypeToLinear()
+    prop.ShadeOff()
+
+    mapper = vtk.vtkFixedPointVolumeRayCastMapper()
+    mapper.SetInputConnection(port)
+    mapper.SetBlendModeToComposite()
+    mapper.SetNumberOfThreads(threads)
+    mapper.AutoAdjustSampleDistancesOff()
+    mapper.LockSampleDistanceToInputSpacingOff()
+    mapper.SetImageSampleDistance(1.0)
+    mapper.SetFinalColorWindow(1.0)
+    mapper.SetFinalColorLevel(0.5)
+    if domain == "box":
+        mapper.CroppingOn()
+        mapper.SetCroppingRegionPlanes(0.0, extent[0], 0.0, extent[1], 0.0, extent[2])
+        mapper.SetCroppingRegionFlagsToSubVolume()
+
+    volume = vtk.vtkVolume()
+    volume.SetMapper(mapper)
+    volume.SetProperty(prop)
+
+    ren = vtk.vtkRenderer()
+    ren.AddVolume(volume)
+    ren.SetBackground(0.0, 0.0, 0.0)
+    ren.SetBackgroundAlpha(0.0)
+    win = vtk.vtkRenderWindow()
+    win.SetOffScreenRendering(1)
+    win.SetAlphaBitPlanes(1)
+    win.SetMultiSamples(0)
+    win.AddRenderer(ren)
+    win.SetSize(W, H)
+
+    # The camera, in volume space (mm): the inverse placement of the eye, of
+    # the screen centre and of display +y; vertical view angle through the
+    # screen's top and bottom edges. The screen plane is perpendicular to the
+    # eye→centre line, so VTK's symmetric frustum is exactly the window.
+    cam = ren.GetActiveCamera()
+    cam.ParallelProjectionOff()
+    cam.SetPosition(*placement.to_volume(EYE))
+    cam.SetFocalPoint(*placement.to_volume([0.0, 0.0, 0.0]))
+    cam.SetViewUp(*placement.dir_to_volume([0.0, 1.0, 0.0]))
+    cam.SetViewAngle(math.degrees(2.0 * math.atan(SCREEN[1] / 2 / EYE[2])))
+    cam.UseHorizontalViewAngleOff()
+    ren.ResetCameraClippingRange()
+
+    grab = vtk.vtkWindowToImageFilter()
+    grab.SetInput(win)
+    grab.SetInputBufferTypeToRGBA()
+    grab.ReadFrontBufferOff()
+    grab.ShouldRerenderOff()
+
+    info = {
+        "vtk_version": vtk.vtkVersion.GetVTKVersion(),
+        "threads": mapper.GetNumberOfThreads(),
+        "global_default_threads": vtk.vtkMultiThreader.GetGlobalDefaultNumberOfThreads(),
+        "window_class": win.GetClassName(),
+        "volume_bounds": volume.GetBounds(),
+        "cropping": mapper.GetCropping() and mapper.GetCroppingRegionPlanes(),
+        "camera_position": cam.GetPosition(),
+        "camera_focal_point": cam.GetFocalPoint(),
+        "camera_view_up": cam.GetViewUp(),
+        "camera_view_angle": cam.GetViewAngle(),
+        "clipping_range": cam.GetClippingRange(),
+    }
+    return dict(vtk=vtk, ns=ns, mapper=mapper, win=win, ren=ren, grab=grab, info=info,
+                keep=(source, volume, prop))
+
+
+def vtk_read_framebuffer(v):
+    """The window's RGBA (8 bit per channel), top row first, as float."""
+    v["grab"].Modified()
+    v["grab"].Update()
+    out = v["grab"].GetOutput()
+    w, h, _ = out.GetDimensions()
+    a = v["ns"].vtk_to_numpy(out.GetPointData().GetScalars()).reshape(h, w, 4)
+    return a[::-1].astype(np.float32) / 255.0
+
+
+def vtk_read_raycast_image(v):
+    """The mapper's own ray-cast image (15-bit fixed point, before it is drawn
+    into the 8-bit framebuffer), top row first, as float."""
+    im = v["mapper"].GetRayCastImage()
+    vw, vh = im.GetImageViewportSize()
+    mw, mh = im.GetImageMemorySize()
+    uw, uh = im.GetImageInUseSize()
+    ox, oy = im.GetImageOrigin()
+    assert (vw, vh) == (W, H), (vw, vh)
+    m = re.match(r"_([0-9a-fA-F]+)_p_", im.GetImage())
+    assert m, im.GetImage()
+    buf = (ctypes.c_uint16 * (mw * mh * 4)).from_address(int(m.group(1), 16))
+    data = np.frombuffer(buf, dtype=np.uint16).reshape(mh, mw, 4)[:uh, :uw].astype(np.float32)
+    full = np.zeros((H, W, 4), np.float32)
+    full[oy:oy + uh, ox:ox + uw] = data / 32767.0
+    return full[::-1].copy()
+
+
+def vtk_run(v, sample_distance, repeats):
+    """Median wall time of renWin.Render() over `repeats` undisturbed renders
+    after one warm-up (tables, min-max volume, GL context)."""
+    v["mapper"].SetSampleDistance(sample_distance)
+    v["win"].Render()
+    times, cores, others = [], [], []
+    disturbed = 0
+    wait_idle()
+    while len(times) < repeats:
+        with Meter() as m:
+            v["win"].Render()
+        if m.other_cores > 0.1:
+            disturbed += 1
+            if disturbed <= 20:
+                log(f"    (render disturbed: other processes {m.other_cores:.2f} cores; again)")
+                wait_idle()
+                continue
+            if disturbed == 21:
+                log("    WARNING: could not get undisturbed renders; keeping disturbed ones")
+        times.append(m.wall * 1e3)
+        cores.append(m.cores)
+        others.append(m.other_cores)
+    return (times, statistics.median(cores), max(others),
+            vtk_read_framebuffer(v), vtk_read_raycast_image(v))
+
+
+# --------------------------------------------------------------------------
+
+def fmt(x, spec):
+    return "" if x == "" or x is None else format(x, spec)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--parallax", default=str(ROOT / "target/release/parallax"))
+    ap.add_argument("--out", default=str(ROOT / "out/bench-vtk"))
+    ap.add_argument("--frames", type=int, default=8)
+    ap.add_argument("--repeats", type=int, default=5, help="timed VTK renders (median)")
+    ap.add_argument("--threads", type=int, default=os.cpu_count() or 2, help="VTK ray cast threads")
+    ap.add_argument("--reuse", action="store_true", help="reuse Parallax runs whose scene is unchanged")
+    ap.add_argument("--csv", default=str(BENCH / "vtk_results.csv"))
+    a = ap.parse_args()
+
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    px = Path(a.parallax)
+    dbs = {"full": (out / "colin27-full.pxo").resolve(), "8-bit": (out / "colin27-8bit.pxo").resolve()}
+    for k, p in dbs.items():
+        if not p.exists():
+            sys.exit(f"{p} missing: run bench/vtk_compare.sh (it imports the databases)")
+
+    base = tomllib.loads((BENCH / "vtk_scene.toml").read_text())
+    tf = load_tf((BENCH / base["transfer_function"]).resolve())
+    pl = base["placement"]
+    volume = vtk_read_volume()
+    dims, spacing = volume[1], volume[2]
+    extent = tuple(d * s for d, s in zip(dims, spacing))     # N·s: (181, 217, 181) mm
+    placement = Placement(pl["center"], pl["size"], pl["rotation_deg"], extent)
+    log(f"volume {dims} voxels of {spacing} mm, box {extent} mm; voxel order checked against the file")
+
+    # ---- Parallax: the reference, then the timed configurations.
+    log("Parallax renders (lavapipe unless PARALLAX_ADAPTER says otherwise):")
+    ref_render = dict(step_factor=0.0625, interpolation="exact", accuracy=0.01,
+                      early_termination=1.0, visibility_feedback=False,
+                      cpu_cache_mb=2048, gpu_cache_mb=1024, upload_budget=100000)
+    ref, ref_stats = run_parallax(px, "reference", base, dbs["full"], ref_render, out, a.frames, a.reuse,
+                                 timed=False)     # only its image counts
+    if not ref_stats["adequate"]:
+        log("  WARNING: the reference's cut was not adequate over its last 3 frames")
+
+    rows = []
+    ours = {}
+    for bricks in ["8-bit", "full"]:
+        for et_name, et in [("vtk", VTK_EARLY_TERMINATION), ("off", 1.0)]:
+            for s in STEPS + (EXTRA_STEPS if et < 1 else []):
+                name = f"ours-{bricks}-step{s}-et{et_name}"
+                img, st = run_parallax(px, name, base, dbs[bricks],
+                                       dict(step_factor=s, early_termination=et), out, a.frames, a.reuse)
+                rmse, mx, psnr = image_error(img, ref)
+                ours[name] = img
+                rows.append(dict(renderer="parallax", config=f"{bricks} bricks",
+                                 step_mm=s, early_termination=round(et, 5), readback="float32",
+                                 time_ms=st["render_ms"], rmse=rmse, max_abs=mx, psnr_db=psnr,
+                                 cores=st["cores"], other_cores=st["other_cores"],
+                                 light_frame_render_ms=st["light_frame_render_ms"],
+                                 bricks=st["bricks"], adequate=st["adequate"],
+                                 **{k: st[k] for k in STAGES}))
+
+    # ---- VTK, on Parallax's domain (padded + cropped) and as it comes.
+    log("VTK vtkFixedPointVolumeRayCastMapper:")
+    vtk_imgs = {}
+    infos = {}
+    for domain in ["box", "centres"]:
+        v = vtk_setup(tf, placement, a.threads, domain, volume)
+        info = infos[domain] = v["info"]
+        log(f"  domain '{domain}':")
+        for k, val in info.items():
+            log(f"    {k}: {val}")
+        b = info["volume_bounds"]
+        lo = -0.5 if domain == "box" else 0.5
+        for ax in range(3):
+            assert abs(b[2 * ax] - lo * spacing[ax]) < 1e-9 and abs(b[2 * ax + 1] - extent[ax] + lo * spacing[ax]) < 1e-9, b
+        for s in [0.125] + STEPS + EXTRA_STEPS:
+            times, cores, other, fb, rc = vtk_run(v, s, a.repeats)
+            t = statistics.median(times)
+            log(f"    sample distance {s} mm: Render() {', '.join(f'{x:.0f}' for x in times)} ms → "
+                f"median {t:.0f} ms, {cores:.2f} cores busy")
+            vtk_imgs[(domain, s)] = (fb, rc)
+            reads = [("ray-cast image 15-bit", rc), ("framebuffer 8-bit", fb)]
+            for readback, img in reads if domain == "box" else reads[:1]:
+                rmse, mx, psnr = image_error(img, ref)
+                rows.append(dict(renderer="vtk",
+                                 config="box [0,N·s]" if domain == "box" else "voxel-centre box",
+                                 step_mm=s, early_termination=round(VTK_EARLY_TERMINATION, 5),
+                                 readback=readback, time_ms=t, rmse=rmse, max_abs=mx, psnr_db=psnr,
+                                 cores=cores, other_cores=other, bricks="", adequate="", light_frame_render_ms="",
+                                 **{k: "" for k in STAGES}))
+        v["win"].Finalize()
+        del v
+
+    # ---- Alignment: VTK's image must land on ours.
+    c_ref = alpha_centroid(ref)
+    log("Alignment (alpha-weighted centroid, pixels from the top-left corner; step 0.25 mm):")
+    log(f"  reference                     ({c_ref[0]:.3f}, {c_ref[1]:.3f})")
+    checks = [("vtk box, ray-cast image", vtk_imgs[("box", 0.25)][1], True),
+              ("vtk box, framebuffer", vtk_imgs[("box", 0.25)][0], True),
+              ("vtk centres, ray-cast image", vtk_imgs[("centres", 0.25)][1], False),
+              ("parallax 8-bit", ours["ours-8-bit-step0.25-etvtk"], True)]
+    for nm, img, strict in checks:
+        c = alpha_centroid(img)
+        sh = best_shift(img, ref)
+        d = (c[0] - c_ref[0], c[1] - c_ref[1])
+        log(f"  {nm:29s} ({c[0]:.3f}, {c[1]:.3f})  Δ = ({d[0]:+.3f}, {d[1]:+.3f}) px, "
+            f"best whole-pixel shift {sh}")
+        if strict:
+            assert abs(d[0]) < 1.0 and abs(d[1]) < 1.0, f"{nm} is misaligned"
+            assert sh == (0, 0), f"{nm} matches best when shifted by {sh}"
+    rc = vtk_imgs[("box", 0.25)][1]
+    log(f"  pixels with A > 1e-3: reference {(ref[..., 3] > 1e-3).sum()}, vtk {(rc[..., 3] > 1e-3).sum()}")
+
+    # ---- Pictures: reference | VTK 0.5 mm | ours 0.5 mm 8-bit, and 10×|error|.
+    fb5, rc5 = vtk_imgs[("box", 0.5)]
+    o5 = ours["ours-8-bit-step0.5-etvtk"]
+    top = np.concatenate([to_srgb8(ref), to_srgb8(rc5), to_srgb8(o5)], axis=1)
+    err = lambda x: (np.clip(np.abs(x - ref).max(axis=-1) * 10.0, 0, 1) * 255).astype(np.uint8)
+    bot = np.concatenate([np.repeat(err(x)[..., None], 3, axis=-1) for x in (ref, rc5, o5)], axis=1)
+    write_png(out / "compare.png", np.concatenate([top, bot], axis=0))
+    np.save(out / "reference.npy", ref)
+    np.save(out / "vtk_step0.5_raycast.npy", rc5)
+    np.save(out / "vtk_step0.5_framebuffer.npy", fb5)
+    np.save(out / "vtk_centres_step0.5_raycast.npy", vtk_imgs[("centres", 0.5)][1])
+
+    # ---- Table.
+    cols = ["renderer", "config", "step_mm", "early_termination", "readback", "time_ms",
+            "rmse", "max_abs", "psnr_db", "cores", "other_cores"] + STAGES + ["light_frame_render_ms", "bricks", "adequate"]
+    with open(a.csv, "w", newline="") as f:
+        wr = csv.DictWriter(f, fieldnames=cols)
+        wr.writeheader()
+        for r in rows:
+            rr = dict(r)
+            for k in ["time_ms", "light_frame_render_ms"] + STAGES:
+                rr[k] = fmt(rr[k], ".1f")
+            for k in ["cores", "other_cores"]:
+                rr[k] = fmt(rr[k], ".2f")
+            rr["rmse"] = f"{rr['rmse']:.4e}"
+            rr["max_abs"] = f"{rr['max_abs']:.4e}"
+            rr["psnr_db"] = f"{rr['psnr_db']:.2f}"
+            wr.writerow(rr)
+
+    log("")
+    log(f"Reference: Parallax, full bricks, step 1/16 mm, exact interpolation, no early termination "
+        f"(render {ref_stats['render_ms']:.0f} ms, {ref_stats['bricks']} bricks).")
+    log(f"{'renderer':9s} {'config':17s} {'step':>5s} {'ET':>7s} {'readback':22s} {'ms':>8s} "
+        f"{'RMSE':>10s} {'max|e|':>9s} {'PSNR':>6s} {'cores':>5s}")
+    for r in rows:
+        log(f"{r['renderer']:9s} {r['config']:17s} {r['step_mm']:5.3g} {r['early_termination']:7.5f} "
+            f"{r['readback']:22s} {r['time_ms']:8.1f} {r['rmse']:10.3e} {r['max_abs']:9.2e} "
+            f"{r['psnr_db']:6.1f} {r['cores']:5.2f}")
+
+    log("")
+    log("Time ratio Parallax / VTK at the same step (render_ms vs Render() wall time), "
+        "early termination matched to VTK's, VTK on the box domain:")
+    for s in STEPS:
+        vt = next(r for r in rows if r["renderer"] == "vtk" and r["step_mm"] == s
+                  and r["config"].startswith("box") and r["readback"].startswith("ray"))
+        for bricks in ["8-bit", "full"]:
+            o = next(r for r in rows if r["renderer"] == "parallax" and r["step_mm"] == s
+                     and r["config"].startswith(bricks) and r["early_termination"] < 1)
+            log(f"  step {s:4} mm, {bricks:5s}: {o['time_ms']:7.1f} / {vt['time_ms']:7.1f} ms = "
+                f"{o['time_ms'] / vt['time_ms']:.2f}   (RMSE {o['rmse']:.2e} vs {vt['rmse']:.2e})")
+
+    log("")
+    log("At comparable error: for each VTK setting (box domain, ray-cast image), the fastest "
+        "Parallax setting with early termination matched and an RMSE no larger:")
+    pairs = []
+    for vt in rows:
+        if not (vt["renderer"] == "vtk" and vt["config"].startswith("box") and vt["readback"].startswith("ray")):
+            continue
+        ok = [o for o in rows if o["renderer"] == "parallax" and o["early_termination"] < 1
+              and o["rmse"] <= vt["rmse"]]
+        if not ok:
+            log(f"  VTK {vt['step_mm']:5} mm (RMSE {vt['rmse']:.2e}, {vt['time_ms']:6.1f} ms): no Parallax setting as accurate")
+            continue
+        o = min(ok, key=lambda r: r["time_ms"])
+        pairs.append((vt, o))
+        log(f"  VTK {vt['step_mm']:5} mm (RMSE {vt['rmse']:.2e}, {vt['time_ms']:6.1f} ms) ↔ Parallax "
+            f"{o['config']} {o['step_mm']} mm (RMSE {o['rmse']:.2e}, {o['time_ms']:6.1f} ms): "
+            f"ratio {o['time_ms'] / vt['time_ms']:.2f}")
+
+    log("")
+    log("Where Parallax's time goes (median of the last 3 frames, ms):")
+    log(f"  {'run':32s} " + " ".join(f"{k[:-3]:>8s}" for k in STAGES) + "  light frame  bricks adequate")
+    for r in rows:
+        if r["renderer"] == "parallax":
+            nm = f"{r['config']} {r['step_mm']} ET {r['early_termination']}"
+            log(f"  {nm:32s} " + " ".join(f"{r[k]:8.1f}" for k in STAGES)
+                + f"  {r['light_frame_render_ms']:11.1f}  {r['bricks']:6} {r['adequate']}")
+    log("  (light frame: render_ms of the lighter of frames 0-1, when nothing or only the coarse root "
+        "brick is resident: an upper bound of the fixed per-frame cost of dispatch and image/feedback readback)")
+    log(f"\nwrote {a.csv}, {out / 'compare.png'} (reference | VTK 0.5 mm | Parallax 8-bit 0.5 mm; "
+        f"below: 10×|error|)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Parallax vs VTK's vtkFixedPointVolumeRayCastMapper on the Colin27 MRI
+# (bench/vtk_compare.py says what is measured and how). Installs what it
+# needs (vtk and numpy from PyPI; the project's own system packages through
+# scripts/setup.sh; xvfb only if VTK cannot render off screen), builds,
+# imports the two databases, then runs the comparison.
+#
+#   bash bench/vtk_compare.sh [--reuse]      (arguments go to vtk_compare.py)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+. scripts/setup.sh
+
+python3 -c 'import vtk, numpy' 2>/dev/null || python3 -m pip install --quiet vtk numpy
+
+cargo build --release --locked 2>&1 | tail -n 3
+px=target/release/parallax
+out=out/bench-vtk
+src=/usr/share/mricron/templates/ch2.nii.gz
+mkdir -p "$out"
+[ -f "$out/colin27-full.pxo" ] || $px import "$src" -o "$out/colin27-full.pxo" --quantize none
+[ -f "$out/colin27-8bit.pxo" ] || $px import "$src" -o "$out/colin27-8bit.pxo" --quantize u8
+
+# VTK renders off screen through EGL (or OSMesa) on recent PyPI wheels; fall
+# back to a virtual X display only if that fails.
+run=(python3)
+if ! python3 - <<'EOF' >/dev/null 2>&1
+import vtk
+w = vtk.vtkRenderWindow(); w.SetOffScreenRendering(1); w.SetSize(8, 8)
+w.AddRenderer(vtk.vtkRenderer()); w.Render()
+EOF
+then
+  echo "VTK cannot render off screen here: using xvfb-run"
+  command -v xvfb-run >/dev/null || { apt-get update -qq; DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb >/dev/null; }
+  run=(xvfb-run -a -s "-screen 0 1024x768x24" python3)
+fi
+"${run[@]}" bench/vtk_compare.py "$@"
