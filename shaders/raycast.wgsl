@@ -333,8 +333,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             loop {
                 let tn = min(tc + h, t_exit);
                 let s = sample_brick(leaf, o + d * tn);
+                let avg = segment_average(s_prev, s);
                 var shade = 1.0;
-                if (SHADING) {
+                // A transparent segment adds nothing: no gradient needed.
+                if (SHADING && avg.x > 0.0) {
                     let g = gradient(leaf, o + d * (0.5 * (tc + tn)));
                     let gl = length(g);
                     if (gl > 1e-6) {
@@ -343,7 +345,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         shade = frame.light.x + frame.light.y * diff + frame.light.z * pow(diff, frame.light.w);
                     }
                 }
-                composite(&acc, segment_average(s_prev, s), tn - tc, shade);
+                composite(&acc, avg, tn - tc, shade);
                 s_prev = s;
                 tc = tn;
                 if (tc >= t_exit || acc.alpha >= opaque) {
