@@ -19,6 +19,13 @@ $px render --scene configs/scenes/colin27-brain.toml --frames 8 --sync --out "$o
 
 cp "$out/skin/frame_00007/window.png" "$out/colin27-skin.png"
 cp "$out/brain/frame_00007/window.png" "$out/colin27-brain.png"
+
+# The light field: a 16-projector wall (η = 1), and what five eyes along
+# the viewing line see on it.
+$px render --scene configs/scenes/colin27-wall.toml --frames 6 --sync --out "$out/wall16"
+$px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16/frame_00005" \
+  --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-eyes.png"
+
 echo
-echo "Look at: $out/colin27-skin.png and $out/colin27-brain.png"
+echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png and $out/wall16-eyes.png"
 echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"
