@@ -1,5 +1,6 @@
 //! The GPU ray caster on a full-detail cut against the reference integral.
 
+mod support;
 use parallax_backend::data::synth::{synth_value, SynthKind};
 use parallax_backend::gpu::Gpu;
 use parallax_backend::index::{CutNode, SpatialIndex};
@@ -83,19 +84,6 @@ fn full_cut(
     (cut, pool)
 }
 
-fn rmse(a: &[[f32; 4]], b: &[[f64; 4]]) -> (f64, f64) {
-    let mut sq = 0.0;
-    let mut mx = 0f64;
-    for (x, y) in a.iter().zip(b) {
-        for c in 0..4 {
-            let d = x[c] as f64 - y[c];
-            sq += d * d;
-            mx = mx.max(d.abs());
-        }
-    }
-    ((sq / (a.len() * 4) as f64).sqrt(), mx)
-}
-
 fn scene(db: &OctreeDb) -> SceneGeometry {
     SceneGeometry {
         placement: Placement {
@@ -151,7 +139,7 @@ fn full_detail(filtering: Filtering, bound: f64) {
             .render(&gpu, &pool, &index, &gtf, &sc, &[view], &settings)
             .unwrap();
         let want = reference::render(&s.vol, &f, &sc.placement, &view, Tolerance::default());
-        let (e, mx) = rmse(&out.images[0], &want);
+        let (e, mx) = support::error(&out.images[0], &want);
         let mean_a: f64 = want.iter().map(|p| p[3]).sum::<f64>() / want.len() as f64;
         eprintln!("{filtering:?} {kind:?}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}");
         if let Ok(dir) = std::env::var("PARALLAX_TEST_IMAGES") {
@@ -304,7 +292,7 @@ fn both_table_paths_match_the_reference() {
             .render(&gpu, &pool, &index, &gtf, &sc, &[view], &settings)
             .unwrap();
         let want = reference::render(&s.vol, &f, &sc.placement, &view, Tolerance::default());
-        let (e, mx) = rmse(&out.images[0], &want);
+        let (e, mx) = support::error(&out.images[0], &want);
         let mean_a: f64 = want.iter().map(|p| p[3]).sum::<f64>() / want.len() as f64;
         eprintln!(
             "running integral {prefix}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}"

@@ -4,6 +4,7 @@
 //! smaller than the data, and on degenerate input. Every test prints the
 //! figures it asserts on.
 
+mod support;
 use parallax_backend::data::{self, synth_value, write_synth, SynthKind};
 use parallax_backend::index::MAX_INDEX_NODES;
 use parallax_backend::loader::{Loader, LoaderConfig};
@@ -15,10 +16,11 @@ use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Interpolation, RenderConfig, Shading};
 use parallax_common::octree::{BrickEncoding, NodeKey, OctreeDb};
 use parallax_common::tf::{ControlPoint, EmptinessTable, PreintTable, TransferFunction};
-use parallax_common::volume::{MemorySource, Volume, VoxelType};
+use parallax_common::volume::{Volume, VoxelType};
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use support::{import_volume, marschner_lobb};
 
 const COLIN27: &str = "/usr/share/mricron/templates/ch2.nii.gz";
 
@@ -69,27 +71,6 @@ fn exact_config() -> RenderConfig {
     }
 }
 
-fn import_volume(vol: &Volume, path: &Path, brick: usize, encoding: BrickEncoding) {
-    store::import(
-        &mut MemorySource::new(vol),
-        path,
-        "renderer test",
-        &ImportOptions {
-            brick,
-            encoding,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-}
-
-/// n³ Marschner–Lobb, 8 bit.
-fn marschner_lobb(n: usize) -> Volume {
-    Volume::from_fn([n, n, n], [1.0; 3], VoxelType::U8, |i, j, k| {
-        (synth_value(SynthKind::MarschnerLobb, i, j, k, n) * 255.0).round() as f32
-    })
-}
-
 fn renderer(db: &Path, tf: &TransferFunction, cfg: &RenderConfig) -> Renderer {
     let mut r = Renderer::new(db, cfg).unwrap();
     r.set_transfer_function(1, tf).unwrap();
@@ -120,17 +101,7 @@ fn converge_counting(
 
 /// RMSE and max abs difference over every channel of every pixel.
 fn diff_ref(a: &[[f32; 4]], b: &[[f64; 4]]) -> (f64, f64) {
-    assert_eq!(a.len(), b.len());
-    let mut sq = 0.0;
-    let mut mx = 0f64;
-    for (x, y) in a.iter().zip(b) {
-        for c in 0..4 {
-            let d = x[c] as f64 - y[c];
-            sq += d * d;
-            mx = mx.max(d.abs());
-        }
-    }
-    ((sq / (a.len().max(1) * 4) as f64).sqrt(), mx)
+    support::error(a, b)
 }
 
 fn diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> (f64, f64) {

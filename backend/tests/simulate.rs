@@ -5,19 +5,20 @@
 //! it should; degenerate eyes and displays give black, never NaN; frames load
 //! from `.npy` or sRGB `.png`. Every test prints the figures it asserts on.
 
-use parallax_backend::data::{synth_value, SynthKind};
+mod support;
 use parallax_backend::output::{write_npy, write_png};
 use parallax_backend::render::Renderer;
 use parallax_backend::simulate::{
     default_resolution, load_frame, parse_eye, sample, simulate, simulate_detailed, strip, sweep,
 };
-use parallax_backend::store::{self, ImportOptions};
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{
     Display, Interpolation, Observer, Projector, RenderConfig, Screen, Shading,
 };
+use parallax_common::octree::BrickEncoding;
 use parallax_common::tf::{ControlPoint, TransferFunction};
-use parallax_common::volume::{MemorySource, Volume, VoxelType};
+use support::{import_volume, marschner_lobb};
+
 use parallax_common::wall::{Layout, WallSpec};
 use std::path::Path;
 
@@ -43,12 +44,6 @@ fn wall(dir: &Path, n: usize) -> Display {
     let d = dir.join(format!("wall{n}"));
     spec.write(&d).unwrap();
     Display::load(&d.join("display.toml")).unwrap()
-}
-
-fn marschner_lobb(n: usize) -> Volume {
-    Volume::from_fn([n, n, n], [1.0; 3], VoxelType::U8, |i, j, k| {
-        (synth_value(SynthKind::MarschnerLobb, i, j, k, n) * 255.0).round() as f32
-    })
 }
 
 fn translucent() -> TransferFunction {
@@ -79,16 +74,7 @@ fn config() -> RenderConfig {
 fn setup(dir: &Path) -> Renderer {
     let vol = marschner_lobb(48);
     let db = dir.join("ml48.pxo");
-    store::import(
-        &mut MemorySource::new(&vol),
-        &db,
-        "simulate test",
-        &ImportOptions {
-            brick: 16,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    import_volume(&vol, &db, 16, BrickEncoding::U8Range);
     let mut r = Renderer::new(&db, &config()).unwrap();
     r.set_transfer_function(1, &translucent()).unwrap();
     r

@@ -1,0 +1,42 @@
+//! Fixtures shared by the back end's integration tests.
+#![allow(dead_code)]
+
+use parallax_backend::data::synth::{synth_value, SynthKind};
+use parallax_backend::store::{self, ImportOptions};
+use parallax_common::octree::BrickEncoding;
+use parallax_common::volume::{MemorySource, Volume, VoxelType};
+use std::path::Path;
+
+/// An n³ procedural volume, 8 bit, 1 mm voxels.
+pub fn synth_u8(kind: SynthKind, n: usize) -> Volume {
+    Volume::from_fn([n, n, n], [1.0; 3], VoxelType::U8, |i, j, k| {
+        (synth_value(kind, i, j, k, n) * 255.0).round() as f32
+    })
+}
+
+/// n³ Marschner–Lobb, 8 bit.
+pub fn marschner_lobb(n: usize) -> Volume {
+    synth_u8(SynthKind::MarschnerLobb, n)
+}
+
+/// Imports an in-memory volume into `path`.
+pub fn import_volume(vol: &Volume, path: &Path, brick: usize, encoding: BrickEncoding) {
+    store::import(
+        &mut MemorySource::new(vol),
+        path,
+        "test volume",
+        &ImportOptions {
+            brick,
+            encoding,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+}
+
+/// RMSE and max abs of premultiplied RGBA against a reference image.
+pub fn error(img: &[[f32; 4]], reference: &[[f64; 4]]) -> (f64, f64) {
+    assert_eq!(img.len(), reference.len());
+    let (rmse, max, _) = parallax_backend::bench::image_error(img, reference);
+    (rmse, max)
+}
