@@ -16,14 +16,7 @@ use parallax_common::volume::{MemorySource, Volume, VoxelType};
 use std::collections::HashMap;
 
 fn tf() -> TransferFunction {
-    TransferFunction::from_points(vec![
-        ControlPoint::new(0.0, [0.0, 0.0, 0.0], 0.0),
-        ControlPoint::new(80.0, [0.9, 0.5, 0.2], 0.0),
-        ControlPoint::new(140.0, [0.9, 0.6, 0.3], 0.08),
-        ControlPoint::new(200.0, [0.3, 0.6, 1.0], 0.02),
-        ControlPoint::new(255.0, [1.0, 1.0, 1.0], 0.3),
-    ])
-    .unwrap()
+    support::translucent()
 }
 
 struct Setup {

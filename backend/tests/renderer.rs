@@ -20,7 +20,7 @@ use parallax_common::volume::{Volume, VoxelType};
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use support::{import_volume, marschner_lobb};
+use support::{import_volume, marschner_lobb, translucent};
 
 const COLIN27: &str = "/usr/share/mricron/templates/ch2.nii.gz";
 
@@ -43,18 +43,6 @@ fn centred(size: f64) -> Placement {
         rotation_deg: [20.0, 35.0, 0.0],
         size,
     }
-}
-
-/// A translucent transfer function over 0..255 (as in tests/raycast.rs).
-fn translucent() -> TransferFunction {
-    TransferFunction::from_points(vec![
-        ControlPoint::new(0.0, [0.0, 0.0, 0.0], 0.0),
-        ControlPoint::new(80.0, [0.9, 0.5, 0.2], 0.0),
-        ControlPoint::new(140.0, [0.9, 0.6, 0.3], 0.08),
-        ControlPoint::new(200.0, [0.3, 0.6, 1.0], 0.02),
-        ControlPoint::new(255.0, [1.0, 1.0, 1.0], 0.3),
-    ])
-    .unwrap()
 }
 
 /// Plain DVR, no shading, full-length rays, every leaf at full resolution,

@@ -4,6 +4,7 @@
 use parallax_backend::data::synth::{synth_value, SynthKind};
 use parallax_backend::store::{self, ImportOptions};
 use parallax_common::octree::BrickEncoding;
+use parallax_common::tf::{ControlPoint, TransferFunction};
 use parallax_common::volume::{MemorySource, Volume, VoxelType};
 use std::path::Path;
 
@@ -39,4 +40,17 @@ pub fn error(img: &[[f32; 4]], reference: &[[f64; 4]]) -> (f64, f64) {
     assert_eq!(img.len(), reference.len());
     let (rmse, max, _) = parallax_backend::bench::image_error(img, reference);
     (rmse, max)
+}
+
+/// A translucent transfer function over 0..255: clear below 80, three
+/// coloured materials above.
+pub fn translucent() -> TransferFunction {
+    TransferFunction::from_points(vec![
+        ControlPoint::new(0.0, [0.0, 0.0, 0.0], 0.0),
+        ControlPoint::new(80.0, [0.9, 0.5, 0.2], 0.0),
+        ControlPoint::new(140.0, [0.9, 0.6, 0.3], 0.08),
+        ControlPoint::new(200.0, [0.3, 0.6, 1.0], 0.02),
+        ControlPoint::new(255.0, [1.0, 1.0, 1.0], 0.3),
+    ])
+    .unwrap()
 }
