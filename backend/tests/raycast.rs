@@ -89,6 +89,56 @@ fn scene(db: &OctreeDb) -> SceneGeometry {
     }
 }
 
+/// A full-detail render of the standard test view against the reference
+/// integral (step 1/8 voxel, no early termination, no shading).
+struct Measured {
+    image: Vec<[f32; 4]>,
+    reference: Vec<[f64; 4]>,
+    rmse: f64,
+    max: f64,
+    mean_alpha: f64,
+    running_integral: bool,
+    feedback: Vec<u32>,
+}
+
+fn measure(
+    gpu: &Gpu,
+    rc: &mut Raycaster,
+    s: &Setup,
+    f: &TransferFunction,
+    cut: &HashMap<parallax_common::octree::NodeKey, CutNode>,
+    pool: &BrickPool,
+) -> Measured {
+    let range = (s.db.summary.value_min, s.db.summary.value_max);
+    let (lo, hi) = (range.0 as f64, range.1 as f64);
+    let table = PreintTable::new(f, lo, hi, PreintTable::suggested_bins(lo, hi, true)).unwrap();
+    let gtf = TfTable::new(gpu, &table);
+    let index = SpatialIndex::build(cut, range).unwrap();
+    let sc = scene(&s.db);
+    let view = View::window([40, 32], [0.4, 0.32], [0.02, 0.01, 0.8]);
+    let settings = RenderSettings {
+        step_factor: 0.125,
+        early_termination: 1.0,
+        shading: false,
+    };
+    let mut out = rc
+        .render(gpu, pool, &index, &gtf, &sc, &[view], &settings)
+        .unwrap();
+    let reference = reference::render(&s.vol, f, &sc.placement, &view, Tolerance::default());
+    let image = out.images.remove(0);
+    let (rmse, max) = support::error(&image, &reference);
+    let mean_alpha = reference.iter().map(|p| p[3]).sum::<f64>() / reference.len() as f64;
+    Measured {
+        image,
+        reference,
+        rmse,
+        max,
+        mean_alpha,
+        running_integral: gtf.uses_running_integral(),
+        feedback: out.feedback,
+    }
+}
+
 #[test]
 fn full_detail_matches_the_reference_integral() {
     full_detail(Filtering::Exact, 1e-3);
@@ -114,42 +164,21 @@ fn full_detail(filtering: Filtering, bound: f64) {
     ] {
         let s = setup(kind, 40, BrickEncoding::F32);
         let f = tf();
-        let (lo, hi) = (s.db.summary.value_min as f64, s.db.summary.value_max as f64);
-        let table =
-            PreintTable::new(&f, lo, hi, PreintTable::suggested_bins(lo, hi, true)).unwrap();
-        let gtf = TfTable::new(&gpu, &table);
         let (cut, pool) = full_cut(&gpu, &s.db, true);
-        let index =
-            SpatialIndex::build(&cut, (s.db.summary.value_min, s.db.summary.value_max)).unwrap();
-        let sc = scene(&s.db);
-        let view = View::window([40, 32], [0.4, 0.32], [0.02, 0.01, 0.8]);
-        let settings = RenderSettings {
-            step_factor: 0.125,
-            early_termination: 1.0,
-            shading: false,
-        };
-        let out = rc
-            .render(&gpu, &pool, &index, &gtf, &sc, &[view], &settings)
-            .unwrap();
-        let want = reference::render(&s.vol, &f, &sc.placement, &view, Tolerance::default());
-        let (e, mx) = support::error(&out.images[0], &want);
-        let mean_a: f64 = want.iter().map(|p| p[3]).sum::<f64>() / want.len() as f64;
+        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool);
+        let (out, want, e, mx, mean_a) = (m.image, m.reference, m.rmse, m.max, m.mean_alpha);
+        let feedback = m.feedback;
         eprintln!("{filtering:?} {kind:?}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}");
         if let Ok(dir) = std::env::var("PARALLAX_TEST_IMAGES") {
             let d = std::path::Path::new(&dir);
             let w: Vec<[f32; 4]> = want.iter().map(|p| p.map(|x| x as f32)).collect();
-            let diff: Vec<[f32; 4]> = out.images[0]
+            let diff: Vec<[f32; 4]> = out
                 .iter()
                 .zip(&w)
                 .map(|(a, b)| std::array::from_fn(|c| (a[c] - b[c]).abs() * 10.0))
                 .collect();
-            parallax_backend::output::write_png(
-                &d.join(format!("{kind:?}-gpu.png")),
-                40,
-                32,
-                &out.images[0],
-            )
-            .unwrap();
+            parallax_backend::output::write_png(&d.join(format!("{kind:?}-gpu.png")), 40, 32, &out)
+                .unwrap();
             parallax_backend::output::write_png(&d.join(format!("{kind:?}-ref.png")), 40, 32, &w)
                 .unwrap();
             parallax_backend::output::write_png(
@@ -162,11 +191,8 @@ fn full_detail(filtering: Filtering, bound: f64) {
         }
         assert!(mean_a > 0.05, "the view sees the volume");
         assert!(e <= bound, "{filtering:?} {kind:?}: RMSE {e}");
-        assert!(out.images[0]
-            .iter()
-            .flatten()
-            .all(|v| v.is_finite() && *v >= 0.0));
-        assert!(out.feedback.iter().any(|&f| f != 0));
+        assert!(out.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+        assert!(feedback.iter().any(|&f| f != 0));
     }
 }
 
@@ -259,10 +285,6 @@ fn both_table_paths_match_the_reference() {
     let mut rc = Raycaster::new(&gpu, true, Filtering::Exact).unwrap();
     let s = setup(SynthKind::Shells, 40, BrickEncoding::F32);
     let (cut, pool) = full_cut(&gpu, &s.db, true);
-    let range = (s.db.summary.value_min, s.db.summary.value_max);
-    let index = SpatialIndex::build(&cut, range).unwrap();
-    let sc = scene(&s.db);
-    let view = View::window([40, 32], [0.4, 0.32], [0.02, 0.01, 0.8]);
     let extreme = TransferFunction::from_points(vec![
         ControlPoint::new(0.0, [0.2, 0.2, 0.2], 1e-6),
         ControlPoint::new(90.0, [0.2, 0.2, 0.2], 1e-6),
@@ -271,22 +293,9 @@ fn both_table_paths_match_the_reference() {
     ])
     .unwrap();
     for (f, prefix) in [(tf(), true), (extreme, false)] {
-        let (lo, hi) = (range.0 as f64, range.1 as f64);
-        let table =
-            PreintTable::new(&f, lo, hi, PreintTable::suggested_bins(lo, hi, true)).unwrap();
-        let gtf = TfTable::new(&gpu, &table);
-        assert_eq!(gtf.uses_running_integral(), prefix);
-        let settings = RenderSettings {
-            step_factor: 0.125,
-            early_termination: 1.0,
-            shading: false,
-        };
-        let out = rc
-            .render(&gpu, &pool, &index, &gtf, &sc, &[view], &settings)
-            .unwrap();
-        let want = reference::render(&s.vol, &f, &sc.placement, &view, Tolerance::default());
-        let (e, mx) = support::error(&out.images[0], &want);
-        let mean_a: f64 = want.iter().map(|p| p[3]).sum::<f64>() / want.len() as f64;
+        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool);
+        assert_eq!(m.running_integral, prefix);
+        let (e, mx, mean_a) = (m.rmse, m.max, m.mean_alpha);
         eprintln!(
             "running integral {prefix}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}"
         );

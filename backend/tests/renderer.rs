@@ -20,7 +20,7 @@ use parallax_common::volume::{Volume, VoxelType};
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use support::{import_volume, marschner_lobb, translucent};
+use support::{assert_valid, import_volume, marschner_lobb, mean_alpha, translucent};
 
 const COLIN27: &str = "/usr/share/mricron/templates/ch2.nii.gz";
 
@@ -95,21 +95,6 @@ fn diff_ref(a: &[[f32; 4]], b: &[[f64; 4]]) -> (f64, f64) {
 fn diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> (f64, f64) {
     let b: Vec<[f64; 4]> = b.iter().map(|p| p.map(|x| x as f64)).collect();
     diff_ref(a, &b)
-}
-
-fn mean_alpha(a: &[[f32; 4]]) -> f64 {
-    a.iter().map(|p| p[3] as f64).sum::<f64>() / a.len().max(1) as f64
-}
-
-/// Premultiplied RGBA: finite, no negative value, nothing above 1.
-fn assert_valid(what: &str, img: &[[f32; 4]]) {
-    for (i, p) in img.iter().enumerate() {
-        assert!(
-            p.iter()
-                .all(|v| v.is_finite() && *v >= 0.0 && *v <= 1.0 + 1e-6),
-            "{what}: pixel {i} = {p:?}"
-        );
-    }
 }
 
 fn reference_image(

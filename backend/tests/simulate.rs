@@ -17,7 +17,7 @@ use parallax_common::config::{
 };
 use parallax_common::octree::BrickEncoding;
 use parallax_common::tf::{ControlPoint, TransferFunction};
-use support::{import_volume, marschner_lobb};
+use support::{assert_valid, import_volume, marschner_lobb, mean_alpha};
 
 use parallax_common::wall::{Layout, WallSpec};
 use std::path::Path;
@@ -110,20 +110,6 @@ fn psnr(a: &[[f32; 4]], b: &[[f32; 4]], mask: &[bool]) -> f64 {
         return f64::INFINITY;
     }
     10.0 * (n as f64 / sq).log10()
-}
-
-fn mean_alpha(a: &[[f32; 4]]) -> f64 {
-    a.iter().map(|p| p[3] as f64).sum::<f64>() / a.len().max(1) as f64
-}
-
-fn assert_valid(what: &str, img: &[[f32; 4]]) {
-    for (i, p) in img.iter().enumerate() {
-        assert!(
-            p.iter()
-                .all(|v| v.is_finite() && *v >= 0.0 && *v <= 1.0 + 1e-6),
-            "{what}: pixel {i} = {p:?}"
-        );
-    }
 }
 
 // ---------------------------------------------------------------------------

@@ -54,3 +54,19 @@ pub fn translucent() -> TransferFunction {
     ])
     .unwrap()
 }
+
+/// Mean opacity of an image.
+pub fn mean_alpha(a: &[[f32; 4]]) -> f64 {
+    a.iter().map(|p| p[3] as f64).sum::<f64>() / a.len().max(1) as f64
+}
+
+/// Premultiplied RGBA: finite, no negative value, nothing above 1.
+pub fn assert_valid(what: &str, img: &[[f32; 4]]) {
+    for (i, p) in img.iter().enumerate() {
+        assert!(
+            p.iter()
+                .all(|v| v.is_finite() && *v >= 0.0 && *v <= 1.0 + 1e-6),
+            "{what}: pixel {i} = {p:?}"
+        );
+    }
+}
