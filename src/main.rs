@@ -95,6 +95,10 @@ enum Command {
         /// Back-end threads in the embedded (single-process) mode.
         #[arg(long, default_value_t = 1)]
         backends: usize,
+        /// Seconds to wait for a back end's frame before naming it and
+        /// ending the run (0: wait forever).
+        #[arg(long, default_value_t = parallax_common::protocol::DEFAULT_WATCHDOG.as_secs_f64())]
+        watchdog: f64,
     },
     /// Error against the exact integral beside frame time for a sweep of
     /// every quality knob: DIR/bench.csv and DIR/bench.svg.
@@ -289,7 +293,11 @@ fn run(cli: Cli) -> Result<()> {
             float,
             sync,
             backends,
+            watchdog,
         } => {
+            if !(watchdog.is_finite() && watchdog >= 0.0) {
+                bail!("--watchdog {watchdog}: expected seconds ≥ 0 (0: wait forever)");
+            }
             let opts = parallax_frontend::RunOptions {
                 scene,
                 display,
@@ -299,6 +307,7 @@ fn run(cli: Cli) -> Result<()> {
                 sync_io: sync,
                 script,
                 verbose: true,
+                watchdog: (watchdog > 0.0).then(|| std::time::Duration::from_secs_f64(watchdog)),
             };
             let coordinator = if parallax_frontend::cluster::launched_by_mpi() {
                 render_mpi(&opts)?
@@ -477,9 +486,28 @@ fn render_mpi(opts: &parallax_frontend::RunOptions) -> Result<bool> {
         drop(universe);
         return render_embedded(opts, 1).map(|_| true);
     }
+    // A panic that no back end catches (the coordinator's, an I/O thread's)
+    // must not leave the other ranks waiting for a message that never comes.
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        default_hook(info);
+        if !parallax_backend::node::catching_panics() {
+            eprintln!("error: rank {rank} panicked; ending the MPI job");
+            parallax_frontend::cluster::abort_job(101);
+        }
+    }));
     if rank == 0 {
         let mut t = parallax_frontend::cluster::transport(world);
-        parallax_frontend::run(opts, &mut t).map(|_| true)
+        match parallax_frontend::run(opts, &mut t) {
+            Ok(_) => Ok(true),
+            // Ranks that stopped answering cannot be told to quit: end the
+            // job so the launcher kills them.
+            Err(e) if e.is::<parallax_common::protocol::Unresponsive>() => {
+                eprintln!("error: {e:#}");
+                parallax_frontend::cluster::abort_job(1)
+            }
+            Err(e) => Err(e),
+        }
     } else {
         let mut link = parallax_frontend::cluster::link(world);
         // A back end's error has been reported to rank 0, which exits
@@ -506,6 +534,13 @@ fn render_embedded(opts: &parallax_frontend::RunOptions, backends: usize) -> Res
         .collect();
     let result = parallax_frontend::run(opts, &mut transport);
     drop(transport);
+    if let Err(e) = &result {
+        if e.is::<parallax_common::protocol::Unresponsive>() {
+            // A back end thread that does not answer cannot be joined; the
+            // process ends with the error and takes it along.
+            return result.map(|_| ());
+        }
+    }
     let mut backend_error = None;
     for (i, t) in threads.into_iter().enumerate() {
         match t.join() {

@@ -7,9 +7,38 @@ use crate::render::Renderer;
 use anyhow::{Context, Result};
 use parallax_common::camera::View;
 use parallax_common::config::Display;
+use parallax_common::paths::file_in;
 use parallax_common::protocol::{FrameState, FrameStats, Link, ToBackend};
+use std::cell::Cell;
+use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::time::Instant;
+
+thread_local! {
+    static CATCHING: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Whether the current thread is inside a back end's message handling, where
+/// a panic is caught and becomes an error reply naming the rank (a process
+/// panic hook leaves such panics alone).
+pub fn catching_panics() -> bool {
+    CATCHING.with(|c| c.get())
+}
+
+/// Runs `f`, turning a panic into an error.
+fn catch_panic<T>(f: impl FnOnce() -> Result<T>) -> Result<T> {
+    let before = CATCHING.with(|c| c.replace(true));
+    let r = catch_unwind(AssertUnwindSafe(f));
+    CATCHING.with(|c| c.set(before));
+    r.unwrap_or_else(|payload| {
+        let msg = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "(no message)".into());
+        Err(anyhow::anyhow!("internal error (panic): {msg}"))
+    })
+}
 
 struct Setup {
     display: Display,
@@ -19,10 +48,11 @@ struct Setup {
     renderer: Renderer,
 }
 
-/// Serves the front end until it says quit. After an error the back end
-/// keeps answering every frame with that error (so the front end, which
-/// waits for every back end each frame, learns which rank failed instead of
-/// hanging) until it is told to quit; the error is then returned.
+/// Serves the front end until it says quit. After an error (or a panic,
+/// caught here) the back end keeps answering every frame with that error (so
+/// the front end, which waits for every back end each frame, learns which
+/// rank failed instead of hanging) until it is told to quit; the error is
+/// then returned.
 pub fn serve(link: &mut dyn Link, backends: usize) -> Result<()> {
     let mut setup: Option<Setup> = None;
     let mut failed: Option<anyhow::Error> = None;
@@ -37,7 +67,7 @@ pub fn serve(link: &mut dyn Link, backends: usize) -> Result<()> {
             continue;
         }
         let frame = matches!(msg, ToBackend::Frame(_));
-        match handle(link, backends, &mut setup, msg) {
+        match catch_panic(|| handle(link, backends, &mut setup, msg)) {
             Ok(true) => return Ok(()),
             Ok(false) => {}
             Err(e) => {
@@ -142,9 +172,12 @@ fn render_frame(s: &mut Setup, state: &FrameState) -> Result<FrameStats> {
         for (img, &pi) in frame.images.iter().zip(&s.mine) {
             let p = &s.display.projectors[pi];
             let [w, h] = p.resolution;
-            output::write_png(&fdir.join(format!("{}.png", p.id)), w, h, img)?;
+            // Checked when the display was loaded; checked again here, where
+            // the id becomes a file name, whatever sent the display.
+            let what = format!("projector id '{}'", p.id);
+            output::write_png(&file_in(&fdir, &format!("{}.png", p.id), &what)?, w, h, img)?;
             if s.float {
-                output::write_npy(&fdir.join(format!("{}.npy", p.id)), w, h, img)?;
+                output::write_npy(&file_in(&fdir, &format!("{}.npy", p.id), &what)?, w, h, img)?;
             }
         }
     }
@@ -153,19 +186,28 @@ fn render_frame(s: &mut Setup, state: &FrameState) -> Result<FrameStats> {
     Ok(stats)
 }
 
-/// `PARALLAX_FAULT=exit:<rank>:<frame>` makes back end `<rank>` die at frame
-/// `<frame>` without a word, as a crashed node would: how the tests check
-/// that a run with a dead back end ends with an error naming it instead of
-/// hanging.
+/// `PARALLAX_FAULT=<kind>:<rank>:<frame>` makes back end `<rank>` fail at
+/// frame `<frame>` the way real nodes fail, so the tests can check that each
+/// failure ends the run with an error naming the rank instead of hanging:
+/// `exit` dies without a word (a crashed node), `panic` panics inside the
+/// frame (a bug), `stop` stops the process with SIGSTOP (a node that hangs).
 fn fault_injection(rank: u32, frame: u64) {
-    if let Ok(spec) = std::env::var("PARALLAX_FAULT") {
-        let parts: Vec<&str> = spec.split(':').collect();
-        if parts.len() == 3
-            && parts[0] == "exit"
-            && parts[1].parse() == Ok(rank)
-            && parts[2].parse() == Ok(frame)
-        {
-            std::process::exit(70);
+    let Ok(spec) = std::env::var("PARALLAX_FAULT") else {
+        return;
+    };
+    let parts: Vec<&str> = spec.split(':').collect();
+    if parts.len() != 3 || parts[1].parse() != Ok(rank) || parts[2].parse() != Ok(frame) {
+        return;
+    }
+    match parts[0] {
+        "exit" => std::process::exit(70),
+        "panic" => panic!("fault injection at frame {frame}"),
+        "stop" => {
+            // SAFETY: raise only signals this process.
+            unsafe {
+                libc::raise(libc::SIGSTOP);
+            }
         }
+        _ => {}
     }
 }

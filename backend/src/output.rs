@@ -21,9 +21,19 @@ pub fn srgb8(v: f32) -> u8 {
     (s * 255.0).round() as u8
 }
 
+fn check_len(path: &Path, width: u32, height: u32, px: &[[f32; 4]]) -> Result<()> {
+    anyhow::ensure!(
+        px.len() as u64 == width as u64 * height as u64,
+        "{}: {} pixels for a {width}×{height} image",
+        path.display(),
+        px.len()
+    );
+    Ok(())
+}
+
 /// Writes a premultiplied RGBA image as an sRGB PNG (colour over black).
 pub fn write_png(path: &Path, width: u32, height: u32, px: &[[f32; 4]]) -> Result<()> {
-    assert_eq!(px.len(), (width * height) as usize);
+    check_len(path, width, height, px)?;
     let file = std::fs::File::create(path)
         .with_context(|| format!("{}: cannot create", path.display()))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
@@ -42,7 +52,7 @@ pub fn write_png(path: &Path, width: u32, height: u32, px: &[[f32; 4]]) -> Resul
 
 /// Writes H×W×4 float32 values as a NumPy `.npy` file (format 1.0).
 pub fn write_npy(path: &Path, width: u32, height: u32, px: &[[f32; 4]]) -> Result<()> {
-    assert_eq!(px.len(), (width * height) as usize);
+    check_len(path, width, height, px)?;
     let mut header =
         format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({height}, {width}, 4), }}");
     // magic (6) + version (2) + length (2) + header + '\n', padded to 64

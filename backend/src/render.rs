@@ -56,20 +56,27 @@ impl Renderer {
         let budget = (cfg.gpu_cache_mb * (1 << 20) as f64) as u64;
         let slots = BrickPool::slots_for_budget(budget, side, float)
             .min(crate::index::MAX_INDEX_NODES as u32);
-        if slots == 0 {
+        // Refining a node needs all its children in core and on the GPU at
+        // once (G08 §4): the smallest budgets that make progress hold the
+        // root and one set of eight children (or just the root, for a
+        // one-brick octree). Smaller ones are refused, with the figure.
+        let (min_slots, min_bricks) = if layout.levels > 1 { (9, 8) } else { (1, 1) };
+        if slots < min_slots {
+            let slot_mib = BrickPool::slot_bytes(side, float) as f64 / (1 << 20) as f64;
             bail!(
-                "render.gpu_cache_mb = {}: too small for even the root brick ({:.2} MiB per brick)",
+                "render.gpu_cache_mb = {}: too small: the GPU pool must hold {min_slots} bricks (the root and one set of children) to refine; the smallest that works is {:.2}",
                 cfg.gpu_cache_mb,
-                BrickPool::slot_bytes(side, float) as f64 / (1 << 20) as f64
+                (min_slots as f64 * slot_mib * 100.0).ceil() / 100.0
             );
         }
         let cpu_budget = (cfg.cpu_cache_mb * (1 << 20) as f64) as u64;
         let brick_bytes = layout.stored_len() as u64 * 4;
-        if cpu_budget < brick_bytes {
+        if cpu_budget < min_bricks * brick_bytes {
+            let brick_mib = brick_bytes as f64 / (1 << 20) as f64;
             bail!(
-                "render.cpu_cache_mb = {}: too small for even the root brick ({:.2} MiB per brick)",
+                "render.cpu_cache_mb = {}: too small: the CPU cache must hold {min_bricks} bricks (one set of children) to refine; the smallest that works is {:.2}",
                 cfg.cpu_cache_mb,
-                brick_bytes as f64 / (1 << 20) as f64
+                (min_bricks as f64 * brick_mib * 100.0).ceil() / 100.0
             );
         }
         let pool = BrickPool::new(&gpu, slots, side, float)?;
@@ -158,9 +165,10 @@ impl Renderer {
         let empty = |lo: f32, hi: f32| tf.empty.is_empty(lo as f64, hi as f64);
         let feedback = self.last.as_ref().map(|(i, f)| (i, f.as_slice()));
         let cut = self.loader.update(views, placement, &empty, feedback);
-        if let Some(e) = self.loader.errors().into_iter().next() {
-            bail!("{e}");
-        }
+        // A brick that fails its read or checksum is not fatal: the loader
+        // never asks for it again and its parent stays a leaf (G08 §4 never
+        // blocks on data); the frame names it.
+        stats.bad_bricks = self.loader.errors();
         stats.refine_ms = ms(t);
 
         let t = Instant::now();
@@ -204,6 +212,7 @@ impl Renderer {
         stats.bytes_read = c.bytes_read;
         stats.cpu_bytes = c.cpu_bytes;
         stats.adequate = c.adequate && c.requested == 0 && self.loader.in_flight() == 0;
+        stats.held_back = c.held_back.iter().copied().collect();
         self.last = Some((index, out.feedback));
         stats.total_ms = ms(start);
         Ok(Frame {

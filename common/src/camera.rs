@@ -44,6 +44,13 @@ impl Placement {
     }
 }
 
+/// Largest side of a view, pixels (a 16K projector or window).
+pub const MAX_VIEW_SIDE: u32 = 16384;
+/// Most pixels rendered by one back end in one frame, all its views
+/// together (2^28: pixel offsets stay 32-bit on the GPU; 4 GiB of float
+/// RGBA). Counted in u64 so no sum of resolutions can wrap.
+pub const MAX_FRAME_PIXELS: u64 = 1 << 28;
+
 /// One rendered view: a projector (or a window) whose W×H image covers the
 /// screen region (x0, y0, w, h) of the z = 0 plane.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -1,7 +1,7 @@
 //! Scene and display files (DESIGN.md "Command line", "Display
 //! configuration"). Every error names the file and the field.
 
-use crate::camera::{Placement, View};
+use crate::camera::{Placement, View, MAX_VIEW_SIDE};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -132,14 +132,16 @@ impl Default for RenderConfig {
 #[serde(deny_unknown_fields)]
 pub struct Scene {
     /// The octree database (relative to the scene file).
+    #[serde(with = "crate::paths::bytes")]
     pub volume: PathBuf,
     /// The transfer function file (relative to the scene file).
+    #[serde(with = "crate::paths::bytes")]
     pub transfer_function: PathBuf,
     pub placement: Placement,
     #[serde(default)]
     pub render: RenderConfig,
     /// The display to render for when none is given on the command line.
-    #[serde(default)]
+    #[serde(default, with = "crate::paths::opt_bytes")]
     pub display: Option<PathBuf>,
 }
 
@@ -337,9 +339,10 @@ impl Display {
             if p.position[2].abs() < 1e-9 {
                 bail!("{pn}: position: a projector on the screen plane (z = 0) has no rays through the screen");
             }
-            if p.resolution.contains(&0) {
+            crate::paths::check_file_component(&p.id, &format!("{pn}: id"))?;
+            if p.resolution.contains(&0) || p.resolution.iter().any(|&r| r > MAX_VIEW_SIDE) {
                 bail!(
-                    "{pn}: resolution must be at least 1×1 (got {:?})",
+                    "{pn}: resolution must be from 1×1 to {MAX_VIEW_SIDE}×{MAX_VIEW_SIDE} (got {:?})",
                     p.resolution
                 );
             }

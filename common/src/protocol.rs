@@ -10,6 +10,13 @@ use crate::tf::TransferFunction;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+/// How long the front end waits for every back end's reply to a frame before
+/// it names the ranks that did not answer and ends the run (a stopped or
+/// hung process must not hang the wall). Long enough for the first frame of
+/// a large wall on a software rasteriser.
+pub const DEFAULT_WATCHDOG: Duration = Duration::from_secs(120);
 
 /// The per-frame state every back end renders frame `frame` from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -30,6 +37,7 @@ pub enum ToBackend {
         scene: Scene,
         display: Display,
         /// Where to write images and the float output flag.
+        #[serde(with = "crate::paths::opt_bytes")]
         out_dir: Option<std::path::PathBuf>,
         float: bool,
         /// Wait for every posted brick read before refining a frame, so
@@ -78,6 +86,39 @@ pub struct FrameStats {
     pub adequate: bool,
     /// An error that ended this back end, if any.
     pub error: Option<String>,
+    /// Why refinement stopped short of adequate this frame, where the user
+    /// can change it (a [`HeldBack`] each, named by its config field).
+    #[serde(default)]
+    pub held_back: Vec<HeldBack>,
+    /// Bricks that failed to read or decode this frame (node and file
+    /// offset): their parents stay leaves and the run goes on.
+    #[serde(default)]
+    pub bad_bricks: Vec<String>,
+}
+
+/// A limit that stopped refinement short of adequate, which the user can
+/// raise (DESIGN.md "Working set": refinement stops when the pool is full).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HeldBack {
+    /// The spatial index addresses at most 65,535 nodes.
+    IndexNodes,
+    /// Every GPU pool slot holds a brick of the current cut.
+    GpuPool,
+    /// This frame's uploads were spent (`render.upload_budget`); the rest
+    /// follow in the next frames.
+    UploadBudget,
+}
+
+impl HeldBack {
+    /// What to tell the user, once.
+    pub fn advice(self) -> &'static str {
+        match self {
+            HeldBack::IndexNodes => "the spatial index is full (65,535 nodes): raise render.accuracy or use larger bricks (import --brick)",
+            HeldBack::GpuPool => "the GPU brick pool is full: raise render.gpu_cache_mb or render.accuracy",
+            HeldBack::UploadBudget => "the per-frame upload budget is spent: the cut refines over several frames (render.upload_budget)",
+        }
+    }
 }
 
 /// The bincode configuration of every message.
@@ -85,8 +126,10 @@ pub fn config() -> impl bincode::config::Config {
     bincode::config::standard()
 }
 
-pub fn encode<T: Serialize>(msg: &T) -> Vec<u8> {
-    bincode::serde::encode_to_vec(msg, config()).expect("protocol messages always encode")
+/// Encodes a message. Fails (rather than panics) on anything bincode cannot
+/// encode, so a strange input ends a run with a message, never a hang.
+pub fn encode<T: Serialize>(msg: &T) -> Result<Vec<u8>> {
+    bincode::serde::encode_to_vec(msg, config()).context("cannot encode a protocol message")
 }
 
 pub fn decode<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T> {
@@ -100,8 +143,44 @@ pub trait Transport {
     /// Number of back ends.
     fn backends(&self) -> usize;
     fn broadcast(&mut self, msg: &ToBackend) -> Result<()>;
-    /// One reply from every back end (swap lock: returns once all finished).
+    /// One reply from every back end (swap lock: returns once all finished),
+    /// or an error naming the back ends that did not reply within the
+    /// watchdog timeout.
     fn gather(&mut self) -> Result<Vec<FrameStats>>;
+    /// The watchdog timeout of [`Transport::gather`] (`None`: wait forever).
+    fn set_watchdog(&mut self, timeout: Option<Duration>);
+}
+
+/// The error of a gather whose deadline passed: the back ends that did not
+/// answer. A launcher must end those processes itself (they cannot be told
+/// to quit): see `parallax_frontend::cluster::abort_job`.
+#[derive(Debug)]
+pub struct Unresponsive {
+    pub ranks: Vec<u32>,
+    pub timeout: Duration,
+}
+
+impl std::fmt::Display for Unresponsive {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let ranks: Vec<String> = self.ranks.iter().map(|r| r.to_string()).collect();
+        write!(
+            f,
+            "back end rank{} {} did not answer within {:.0} s (stopped or hung; watchdog timeout, --watchdog)",
+            if self.ranks.len() > 1 { "s" } else { "" },
+            ranks.join(", "),
+            self.timeout.as_secs_f64()
+        )
+    }
+}
+
+impl std::error::Error for Unresponsive {}
+
+pub fn watchdog_error(missing: &[u32], timeout: Duration) -> anyhow::Error {
+    Unresponsive {
+        ranks: missing.to_vec(),
+        timeout,
+    }
+    .into()
 }
 
 /// A back end's side.
@@ -116,6 +195,7 @@ pub trait Link {
 pub struct ChannelTransport {
     to: Vec<mpsc::Sender<Vec<u8>>>,
     from: mpsc::Receiver<Vec<u8>>,
+    watchdog: Option<Duration>,
 }
 
 pub struct ChannelLink {
@@ -138,7 +218,14 @@ pub fn channels(n: usize) -> (ChannelTransport, Vec<ChannelLink>) {
             to: reply_tx.clone(),
         });
     }
-    (ChannelTransport { to, from: reply_rx }, links)
+    (
+        ChannelTransport {
+            to,
+            from: reply_rx,
+            watchdog: Some(DEFAULT_WATCHDOG),
+        },
+        links,
+    )
 }
 
 impl Transport for ChannelTransport {
@@ -147,7 +234,7 @@ impl Transport for ChannelTransport {
     }
 
     fn broadcast(&mut self, msg: &ToBackend) -> Result<()> {
-        let bytes = encode(msg);
+        let bytes = encode(msg)?;
         for (i, t) in self.to.iter().enumerate() {
             t.send(bytes.clone())
                 .map_err(|_| anyhow::anyhow!("back end {} has stopped", i + 1))?;
@@ -156,16 +243,38 @@ impl Transport for ChannelTransport {
     }
 
     fn gather(&mut self) -> Result<Vec<FrameStats>> {
-        let mut out = Vec::with_capacity(self.to.len());
-        for _ in 0..self.to.len() {
-            let bytes = self
-                .from
-                .recv()
-                .map_err(|_| anyhow::anyhow!("a back end stopped without replying"))?;
-            out.push(decode::<FrameStats>(&bytes)?);
+        let n = self.to.len();
+        let deadline = self.watchdog.map(|t| Instant::now() + t);
+        let mut out: Vec<FrameStats> = Vec::with_capacity(n);
+        while out.len() < n {
+            let bytes = match deadline {
+                None => self
+                    .from
+                    .recv()
+                    .map_err(|_| mpsc::RecvTimeoutError::Disconnected),
+                Some(d) => self
+                    .from
+                    .recv_timeout(d.saturating_duration_since(Instant::now())),
+            };
+            match bytes {
+                Ok(b) => out.push(decode::<FrameStats>(&b)?),
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    anyhow::bail!("a back end stopped without replying")
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    let missing: Vec<u32> = (1..=n as u32)
+                        .filter(|r| !out.iter().any(|s| s.rank == *r))
+                        .collect();
+                    return Err(watchdog_error(&missing, self.watchdog.unwrap_or_default()));
+                }
+            }
         }
         out.sort_by_key(|s| s.rank);
         Ok(out)
+    }
+
+    fn set_watchdog(&mut self, timeout: Option<Duration>) {
+        self.watchdog = timeout;
     }
 }
 
@@ -184,7 +293,7 @@ impl Link for ChannelLink {
 
     fn reply(&mut self, stats: &FrameStats) -> Result<()> {
         self.to
-            .send(encode(stats))
+            .send(encode(stats)?)
             .map_err(|_| anyhow::anyhow!("the front end has stopped"))
     }
 }
@@ -208,7 +317,7 @@ mod tests {
             tf_version: 1,
         };
         let msg = ToBackend::Frame(s.clone());
-        let b = encode(&msg);
+        let b = encode(&msg).unwrap();
         assert!(b.len() < 256, "{} bytes", b.len());
         assert_eq!(decode::<ToBackend>(&b).unwrap(), msg);
         assert!(decode::<ToBackend>(&b[..b.len() / 2]).is_err());
@@ -242,14 +351,17 @@ mod tests {
             float: true,
             sync_io: false,
         };
-        assert_eq!(decode::<ToBackend>(&encode(&setup)).unwrap(), setup);
+        assert_eq!(
+            decode::<ToBackend>(&encode(&setup).unwrap()).unwrap(),
+            setup
+        );
         let tf = TransferFunction::from_toml_str(
             "[[point]]\nvalue = 0\ncolor = [1, 0, 0]\nextinction = 0.5\n",
             "t.toml",
         )
         .unwrap();
         let m = ToBackend::TransferFunction { version: 3, tf };
-        assert_eq!(decode::<ToBackend>(&encode(&m)).unwrap(), m);
+        assert_eq!(decode::<ToBackend>(&encode(&m).unwrap()).unwrap(), m);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -298,5 +410,24 @@ mod tests {
         for h in handles {
             h.join().unwrap();
         }
+    }
+
+    #[test]
+    fn gather_names_the_back_end_that_does_not_answer() {
+        let (mut t, mut links) = channels(3);
+        t.set_watchdog(Some(Duration::from_millis(200)));
+        // Back ends 1 and 3 answer; back end 2 is alive but silent.
+        for l in links.iter_mut().filter(|l| l.rank() != 2) {
+            let rank = l.rank();
+            l.reply(&FrameStats {
+                rank,
+                ..Default::default()
+            })
+            .unwrap();
+        }
+        let start = Instant::now();
+        let e = t.gather().unwrap_err().to_string();
+        assert!(start.elapsed() < Duration::from_secs(5));
+        assert!(e.contains("rank 2 ") && e.contains("did not answer"), "{e}");
     }
 }

@@ -8,9 +8,10 @@ pub mod script;
 
 use anyhow::{bail, Context, Result};
 use parallax_common::config::{Display, Scene};
-use parallax_common::protocol::{FrameState, FrameStats, ToBackend, Transport};
+use parallax_common::protocol::{FrameState, FrameStats, HeldBack, ToBackend, Transport};
 use parallax_common::tf::TransferFunction;
 use script::Script;
+use std::collections::BTreeSet;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -29,6 +30,9 @@ pub struct RunOptions {
     pub script: Option<PathBuf>,
     /// Print a line per frame.
     pub verbose: bool,
+    /// How long to wait for a back end's reply before naming it and ending
+    /// the run (`None`: forever).
+    pub watchdog: Option<std::time::Duration>,
 }
 
 /// What a run produced: every back end's figures for every frame.
@@ -64,6 +68,7 @@ pub fn load_display(scene: &Scene, over: Option<&PathBuf>) -> Result<Display> {
 /// Runs a whole session over `transport` and tells the back ends to quit at
 /// the end (also after an error, so no back end is left waiting).
 pub fn run(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSummary> {
+    transport.set_watchdog(opts.watchdog);
     let result = run_frames(opts, transport);
     let _ = transport.broadcast(&ToBackend::Quit);
     result
@@ -106,6 +111,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
     let mut summary = RunSummary::default();
     let mut tf_version = 1u64;
     let mut tf_switch: Option<usize> = None;
+    let mut notes = Notes::default();
     for frame in 0..frames {
         let mut state = FrameState {
             frame,
@@ -143,7 +149,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         let msg = ToBackend::Frame(state);
         summary
             .state_bytes
-            .push(parallax_common::protocol::encode(&msg).len());
+            .push(parallax_common::protocol::encode(&msg)?.len());
         transport.broadcast(&msg)?;
         let stats = transport.gather()?;
         summary.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
@@ -154,11 +160,15 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
                 bad.error.as_deref().unwrap_or("")
             );
         }
+        notes.report(&stats);
+        // Both files are flushed every frame: a run that is killed keeps
+        // the figures of every frame it finished.
         if let Some(f) = stats_file.as_mut() {
             for s in &stats {
                 serde_json::to_writer(&mut *f, s)?;
                 f.write_all(b"\n")?;
             }
+            f.flush()?;
         }
         let wall = *summary.wall_ms.last().unwrap();
         if let Some(f) = frontend_file.as_mut() {
@@ -173,6 +183,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             });
             serde_json::to_writer(&mut *f, &line)?;
             f.write_all(b"\n")?;
+            f.flush()?;
         }
         if opts.verbose {
             println!("{}", frame_line(frame, &stats, wall));
@@ -197,6 +208,40 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         );
     }
     Ok(summary)
+}
+
+/// What the user is told once per run, not once per frame: limits that held
+/// refinement back (each, the first time a back end reports it) and bricks
+/// that could not be read.
+#[derive(Default)]
+struct Notes {
+    held_back: BTreeSet<HeldBack>,
+    bad_bricks: BTreeSet<String>,
+}
+
+impl Notes {
+    fn report(&mut self, stats: &[FrameStats]) {
+        for s in stats {
+            for &h in &s.held_back {
+                if self.held_back.insert(h) {
+                    eprintln!(
+                        "note: frame {}, rank {}: refinement held back: {}",
+                        s.frame,
+                        s.rank,
+                        h.advice()
+                    );
+                }
+            }
+            for b in &s.bad_bricks {
+                if self.bad_bricks.insert(b.clone()) {
+                    eprintln!(
+                        "warning: rank {}: {b}; its parent stays a leaf, the run goes on",
+                        s.rank
+                    );
+                }
+            }
+        }
+    }
 }
 
 /// One line per frame: wall time, the slowest back end, the bricks per back

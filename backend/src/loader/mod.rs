@@ -38,9 +38,10 @@ use geometry::{FrameGeometry, Geometry};
 use io::{IoPool, Landed};
 use parallax_common::camera::{Placement, View};
 use parallax_common::octree::{NodeKey, OctreeDb};
+use parallax_common::protocol::HeldBack;
 use ranges::SubtreeRanges;
 use serde::Serialize;
-use std::collections::{BinaryHeap, HashMap, HashSet, VecDeque};
+use std::collections::{BTreeSet, BinaryHeap, HashMap, HashSet, VecDeque};
 use std::sync::Arc;
 
 /// Budgets and policy of a [`Loader`].
@@ -133,6 +134,8 @@ pub struct CutStats {
     /// Every leaf is adequate (or at the finest level, or culled): nothing is
     /// held back by missing data or budgets.
     pub adequate: bool,
+    /// Limits the user can raise that stopped refinement this frame.
+    pub held_back: BTreeSet<HeldBack>,
 }
 
 /// How a node stands under this frame's transfer function.
@@ -338,6 +341,7 @@ impl Loader {
             if index_nodes + 8 > MAX_INDEX_NODES {
                 // The spatial index addresses nodes with 16 bits.
                 b.stats.adequate = false;
+                b.stats.held_back.insert(HeldBack::IndexNodes);
                 continue;
             }
             if self.refine(key, empty, &frame, &mut b, &mut heap) {
@@ -451,7 +455,7 @@ impl Loader {
         if self.l2.contains(root) {
             b.stats.cache_hits += 1;
             if b.uploads.len() < self.cfg.upload_budget && self.gpu.available() > 0 {
-                return Some(self.upload(root, b));
+                return self.upload(root, b);
             }
             b.wanted.push(Group {
                 cached: vec![root],
@@ -468,11 +472,13 @@ impl Loader {
     }
 
     /// Gives a brick in the CPU cache a GPU slot and lists its upload.
-    fn upload(&mut self, key: NodeKey, b: &mut Build) -> u32 {
-        let data = self.l2.get(key).expect("checked to be in the CPU cache");
-        let (slot, _evicted) = self.gpu.allocate(key).expect("checked to have a slot");
+    /// `None` if the brick has left the CPU cache or every slot is pinned
+    /// (callers check both first; a `None` leaves the node a leaf).
+    fn upload(&mut self, key: NodeKey, b: &mut Build) -> Option<u32> {
+        let data = self.l2.get(key)?;
+        let (slot, _evicted) = self.gpu.allocate(key)?;
         b.uploads.push(Upload { slot, key, data });
-        slot
+        Some(slot)
     }
 
     /// Refines `key` if all its existing non-empty children can be on the GPU
@@ -514,24 +520,52 @@ impl Loader {
         // the slots higher-priority blocked refinements are waiting for.
         let need = cached.len() + missing.len();
         if need > self.gpu.available().saturating_sub(resident + b.reserved) {
+            b.stats.held_back.insert(HeldBack::GpuPool);
             return false; // the GPU pool is full: not even a request
         }
+        // Pin every resident child before any allocation, so no allocation
+        // below can evict a sibling this refinement counts on.
+        for (ch, cl) in &kids {
+            if cl.needs_data {
+                self.gpu.pin(*ch);
+            }
+        }
         if !missing.is_empty() || b.uploads.len() + cached.len() > self.cfg.upload_budget {
+            if missing.is_empty() {
+                // Only this frame's upload budget stands in the way: upload
+                // what it still allows now, the rest in the next frames, so
+                // any budget of at least one brick refines the cut.
+                b.stats.held_back.insert(HeldBack::UploadBudget);
+                let room = self.cfg.upload_budget.saturating_sub(b.uploads.len());
+                let now: Vec<NodeKey> = cached.drain(..room.min(cached.len())).collect();
+                for ch in now {
+                    if self.upload(ch, b).is_none() {
+                        return false;
+                    }
+                }
+            }
             // Not in core yet (never wait), or this frame's uploads are
             // spent: keep what is cached, fetch the rest.
+            let need = cached.len() + missing.len();
             b.reserved += need;
             b.wanted.push(Group { cached, missing });
             return false;
         }
-        for (ch, cl) in kids {
-            let slot = if cl.needs_data {
-                Some(match self.gpu.pin(ch) {
-                    Some(s) => s,
-                    None => self.upload(ch, b),
-                })
+        let mut slots = Vec::with_capacity(kids.len());
+        for (ch, cl) in &kids {
+            slots.push(if cl.needs_data {
+                match self.gpu.slot(*ch) {
+                    Some(s) => Some(s),
+                    None => match self.upload(*ch, b) {
+                        Some(s) => Some(s),
+                        None => return false,
+                    },
+                }
             } else {
                 None
-            };
+            });
+        }
+        for ((ch, cl), slot) in kids.into_iter().zip(slots) {
             b.cut.insert(ch, cut_node(&cl, slot));
             if cl.culled_empty {
                 b.stats.culled_empty += 1;
@@ -618,5 +652,87 @@ fn candidate(frame: &FrameGeometry, key: NodeKey) -> Candidate {
         pixels: a.pixels,
         seen: a.seen,
         key,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::{self, ImportOptions};
+    use parallax_common::volume::{MemorySource, Volume, VoxelType};
+
+    /// The state a CPU cache smaller than the pool and a camera that moved
+    /// away and back leave behind: the pool is full; seven children of the
+    /// root are still resident from earlier frames but have left the CPU
+    /// cache, the oldest of them (child 1) is the least recently used brick
+    /// of all; child 0 is in the CPU cache only. Refining the root must pin
+    /// the resident children before it allocates a slot for child 0, or that
+    /// allocation evicts child 1, which can then be found nowhere.
+    #[test]
+    fn refinement_pins_resident_siblings_before_allocating() {
+        let dir = tempfile::tempdir().unwrap();
+        let vol = Volume::from_fn([64, 64, 64], [1.0; 3], VoxelType::U8, |i, j, k| {
+            ((i * 7 + j * 3 + k * 5) % 50) as f32 + 100.0
+        });
+        let path = dir.path().join("v.pxo");
+        let opts = ImportOptions {
+            brick: 8,
+            ..Default::default()
+        };
+        store::import(&mut MemorySource::new(&vol), &path, "test", &opts).unwrap();
+        let db = Arc::new(OctreeDb::open(&path).unwrap());
+        let side = db.layout().stored_len();
+        let mut loader = Loader::new(
+            db.clone(),
+            LoaderConfig {
+                cpu_budget_bytes: 64 << 20,
+                gpu_slots: 10,
+                upload_budget: 100,
+                accuracy: 1e-6,
+                use_feedback: false,
+                io_threads: 1,
+            },
+        );
+        let root = NodeKey::root();
+        let kids = root.children();
+        let far = |x| NodeKey::new(2, x, 3, 3);
+        // Allocation order is recency order: child 1 oldest, then two
+        // unrelated bricks, then children 2..7, then the root.
+        loader.gpu.begin_frame();
+        for k in [kids[1], far(0), far(1)]
+            .into_iter()
+            .chain(kids[2..].iter().copied())
+            .chain([root])
+        {
+            loader.gpu.allocate(k).unwrap();
+        }
+        loader.gpu.begin_frame();
+        assert_eq!(loader.gpu.available(), 10);
+        for k in [root, kids[0]] {
+            loader.l2.insert(k, Arc::new(vec![100.0; side]));
+        }
+        let view = View::window([32, 32], [0.4, 0.4], [0.0, 0.0, 1.0]);
+        let placement = Placement {
+            center: [0.0; 3],
+            rotation_deg: [0.0; 3],
+            size: 0.3,
+        };
+        let f = loader.update(&[view], &placement, &|_, _| false, None);
+        // The root is refined with every child on the GPU: child 0 uploaded
+        // into a slot freed by an unrelated brick, the others kept.
+        assert!(f.cut[&root].refined);
+        for k in kids {
+            assert!(f.cut[&k].slot.is_some(), "{k}");
+        }
+        assert_eq!(
+            f.uploads.iter().map(|u| u.key).collect::<Vec<_>>(),
+            vec![kids[0]]
+        );
+        assert_eq!(
+            loader.gpu.slot(far(0)),
+            None,
+            "the oldest unrelated brick makes room"
+        );
+        assert!(loader.gpu.slot(far(1)).is_some());
     }
 }

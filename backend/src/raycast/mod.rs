@@ -8,7 +8,7 @@ pub mod pool;
 use crate::gpu::Gpu;
 use crate::index::SpatialIndex;
 use anyhow::{bail, Result};
-use parallax_common::camera::{Placement, View};
+use parallax_common::camera::{Placement, View, MAX_FRAME_PIXELS, MAX_VIEW_SIDE};
 use parallax_common::octree::OctreeLayout;
 use parallax_common::tf::{Channel, PreintLayout, PreintTable};
 use params::{GpuFrame, GpuView};
@@ -324,9 +324,12 @@ impl Raycaster {
             bail!("render: empty spatial index");
         }
         let mut gviews = Vec::with_capacity(views.len());
-        let mut pixels = 0u32;
+        let mut pixels = 0u64;
         for v in views {
             let [w, h] = v.resolution;
+            if w > MAX_VIEW_SIDE || h > MAX_VIEW_SIDE {
+                bail!("render: a {w}×{h} view exceeds {MAX_VIEW_SIDE} pixels per side");
+            }
             gviews.push(GpuView {
                 region: v.region.map(|x| x as f32),
                 eye: [
@@ -341,9 +344,12 @@ impl Raycaster {
                     v.observer[2] as f32,
                     0.0,
                 ],
-                size: [w, h, pixels, 0],
+                size: [w, h, pixels as u32, 0],
             });
-            pixels += w * h;
+            pixels += w as u64 * h as u64;
+            if pixels > MAX_FRAME_PIXELS {
+                bail!("render: the views of one frame have more than {MAX_FRAME_PIXELS} pixels together");
+            }
         }
         let mut images: Vec<Vec<[f32; 4]>> = views.iter().map(|_| Vec::new()).collect();
         if pixels == 0 {
@@ -386,7 +392,7 @@ impl Raycaster {
                 | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let img_size = pixels as u64 * 16;
+        let img_size = pixels * 16;
         if img_size > dev.limits().max_storage_buffer_binding_size {
             bail!("render: {pixels} pixels in one frame exceed the GPU's storage binding limit");
         }

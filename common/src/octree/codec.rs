@@ -83,6 +83,20 @@ pub fn encode(values: &[f32], min: f32, max: f32, encoding: BrickEncoding) -> Ve
     lz4_flex::compress_prepend_size(&raw)
 }
 
+fn bytes_per_value(encoding: BrickEncoding) -> usize {
+    match encoding {
+        BrickEncoding::U8Range => 1,
+        BrickEncoding::U16Range => 2,
+        BrickEncoding::F32 => 4,
+    }
+}
+
+/// The most bytes a brick of `len` values can take on disk (LZ4's worst case
+/// plus its 4-byte size prefix): a longer record is corrupt.
+pub fn max_encoded_len(len: usize, encoding: BrickEncoding) -> usize {
+    4 + lz4_flex::block::get_maximum_output_size(len * bytes_per_value(encoding))
+}
+
 /// Why a stored brick could not be decoded.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum DecodeError {
@@ -111,13 +125,20 @@ pub fn decode(
             computed,
         });
     }
+    let bytes_per = bytes_per_value(encoding);
+    // The size prefix is checked before anything is allocated for it.
+    let declared = stored
+        .get(..4)
+        .map(|b| u32::from_le_bytes(b.try_into().unwrap()) as usize)
+        .ok_or_else(|| DecodeError::Decompress("shorter than its size prefix".into()))?;
+    if declared != len * bytes_per {
+        return Err(DecodeError::Size {
+            got: declared,
+            expected: len * bytes_per,
+        });
+    }
     let raw = lz4_flex::decompress_size_prepended(stored)
         .map_err(|e| DecodeError::Decompress(e.to_string()))?;
-    let bytes_per = match encoding {
-        BrickEncoding::U8Range => 1,
-        BrickEncoding::U16Range => 2,
-        BrickEncoding::F32 => 4,
-    };
     if raw.len() != len * bytes_per {
         return Err(DecodeError::Size {
             got: raw.len(),

@@ -76,20 +76,61 @@ impl OctreeDb {
             bincode::serde::decode_from_slice(&tbytes, bincode_config())
                 .with_context(|| format!("{name}: corrupt node table"))?;
 
+        check_header(&header).map_err(|e| anyhow::anyhow!("{name}: header: {e}"))?;
         let layout = header.layout;
+        if trailer.nodes.len() > layout.node_count() {
+            bail!(
+                "{name}: node table lists {} nodes, more than the {} of a {:?} octree with bricks of {}",
+                trailer.nodes.len(),
+                layout.node_count(),
+                layout.dims,
+                layout.brick
+            );
+        }
+        let max_blob = codec::max_encoded_len(layout.stored_len(), header.encoding);
         let mut index = HashMap::with_capacity(trailer.nodes.len());
         for (i, n) in trailer.nodes.iter().enumerate() {
             if !layout.contains(n.key) {
                 bail!("{name}: node {} lies outside the octree", n.key);
             }
             if n.is_stored()
-                && (n.offset < data_start || n.offset + n.len as u64 > footer.trailer_offset)
+                && (n.offset < data_start
+                    || n.offset
+                        .checked_add(n.len as u64)
+                        .is_none_or(|e| e > footer.trailer_offset))
             {
                 bail!("{name}: brick {} points outside the brick area", n.key);
+            }
+            if n.len as usize > max_blob {
+                bail!(
+                    "{name}: brick {} is {} bytes, more than a brick can encode to ({max_blob})",
+                    n.key,
+                    n.len
+                );
+            }
+            if !(n.min <= n.max) {
+                bail!("{name}: brick {} has range [{}, {}]", n.key, n.min, n.max);
             }
             if index.insert(n.key, i).is_some() {
                 bail!("{name}: node {} is listed twice", n.key);
             }
+        }
+        // Stored bricks never share bytes.
+        let mut spans: Vec<(u64, u64, NodeKey)> = trailer
+            .nodes
+            .iter()
+            .filter(|n| n.is_stored())
+            .map(|n| (n.offset, n.offset + n.len as u64, n.key))
+            .collect();
+        spans.sort_unstable();
+        if let Some(w) = spans.windows(2).find(|w| w[1].0 < w[0].1) {
+            bail!(
+                "{name}: bricks {} and {} overlap in the file (offsets {} and {})",
+                w[0].2,
+                w[1].2,
+                w[0].0,
+                w[1].0
+            );
         }
         Ok(OctreeDb {
             path: path.to_path_buf(),
@@ -135,7 +176,7 @@ impl OctreeDb {
         let mut bytes = vec![0u8; rec.len as usize];
         self.file
             .read_exact_at(&mut bytes, rec.offset)
-            .with_context(|| format!("{name}: brick {key}: read failed"))?;
+            .with_context(|| format!("{name}: brick {key} (offset {}): read failed", rec.offset))?;
         let values = codec::decode(
             &bytes,
             rec.crc,
@@ -146,5 +187,201 @@ impl OctreeDb {
         )
         .map_err(|e| anyhow::anyhow!("{name}: brick {key} (offset {}): {e}", rec.offset))?;
         Ok(Some(values))
+    }
+}
+
+/// Largest brick side a database may declare (bricks of (B+4)³ values).
+pub const MAX_BRICK: usize = 512;
+/// Largest volume side a database may declare (voxels).
+pub const MAX_DIM: usize = 1 << 24;
+
+/// The header's figures against each other and against stated limits,
+/// before anything is computed from them (a crafted or corrupt header must
+/// not divide by zero, overflow or allocate without bound).
+fn check_header(h: &Header) -> Result<()> {
+    let l = &h.layout;
+    if !(1..=MAX_BRICK).contains(&l.brick) {
+        bail!("brick {} is outside 1..={MAX_BRICK}", l.brick);
+    }
+    if l.dims.iter().any(|&d| !(1..=MAX_DIM).contains(&d)) {
+        bail!("dims {:?}: each must be in 1..={MAX_DIM}", l.dims);
+    }
+    if h.info.dims != l.dims {
+        bail!(
+            "dims {:?} of the volume differ from dims {:?} of the octree",
+            h.info.dims,
+            l.dims
+        );
+    }
+    let expected = OctreeLayout::new(l.dims, l.brick).levels;
+    if l.levels != expected {
+        bail!(
+            "levels {} does not match dims {:?} with bricks of {} ({expected} levels)",
+            l.levels,
+            l.dims,
+            l.brick
+        );
+    }
+    if h.info.spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        bail!("spacing {:?}: each must be finite and > 0", h.info.spacing);
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::octree::format::{Footer, Trailer};
+    use crate::octree::writer::NodeStats;
+    use crate::octree::OctreeWriter;
+    use crate::volume::{VolumeInfo, VoxelType};
+
+    /// An 8³ volume in bricks of 4: the root and its eight children, all
+    /// stored.
+    fn small_db(path: &Path) {
+        let layout = OctreeLayout::new([8, 8, 8], 4);
+        assert_eq!(layout.levels, 2);
+        let header = Header {
+            info: VolumeInfo {
+                dims: [8, 8, 8],
+                spacing: [1.0; 3],
+                voxel_type: VoxelType::U8,
+            },
+            layout,
+            encoding: BrickEncoding::U8Range,
+            empty_below: None,
+            source: "crafted".into(),
+        };
+        let mut w = OctreeWriter::create(path, &header).unwrap();
+        let values = vec![10.0f32; layout.stored_len()];
+        let blob = codec::encode(&values, 0.0, 10.0, BrickEncoding::U8Range);
+        let stats = NodeStats {
+            min: 0.0,
+            max: 10.0,
+            mean: 7.0,
+            variance: 0.0,
+        };
+        w.add(NodeKey::root(), stats, Some(&blob)).unwrap();
+        for c in NodeKey::root().children() {
+            w.add(c, stats, Some(&blob)).unwrap();
+        }
+        w.finish(Summary::default()).unwrap();
+    }
+
+    /// Rewrites the header in place (same encoded length), with a valid CRC:
+    /// what a crafted file looks like.
+    fn craft_header(path: &Path, f: impl FnOnce(&mut Header)) {
+        let mut b = std::fs::read(path).unwrap();
+        let len = u32::from_le_bytes(b[12..16].try_into().unwrap()) as usize;
+        let (mut h, _): (Header, usize) =
+            bincode::serde::decode_from_slice(&b[20..20 + len], bincode_config()).unwrap();
+        f(&mut h);
+        let enc = bincode::serde::encode_to_vec(&h, bincode_config()).unwrap();
+        assert_eq!(enc.len(), len);
+        b[16..20].copy_from_slice(&crc32fast::hash(&enc).to_le_bytes());
+        b[20..20 + len].copy_from_slice(&enc);
+        std::fs::write(path, b).unwrap();
+    }
+
+    fn craft_trailer(path: &Path, f: impl FnOnce(&mut Trailer)) {
+        let mut b = std::fs::read(path).unwrap();
+        let n = b.len();
+        let foot = Footer::from_bytes(&b[n - FOOTER_LEN..].try_into().unwrap()).unwrap();
+        let (start, len) = (foot.trailer_offset as usize, foot.trailer_len as usize);
+        let (mut t, _): (Trailer, usize) =
+            bincode::serde::decode_from_slice(&b[start..start + len], bincode_config()).unwrap();
+        f(&mut t);
+        let enc = bincode::serde::encode_to_vec(&t, bincode_config()).unwrap();
+        assert_eq!(enc.len(), len);
+        b[start..start + len].copy_from_slice(&enc);
+        let foot = Footer {
+            trailer_crc: crc32fast::hash(&enc),
+            ..foot
+        };
+        b[n - FOOTER_LEN..].copy_from_slice(&foot.to_bytes());
+        std::fs::write(path, b).unwrap();
+    }
+
+    #[test]
+    fn crafted_headers_and_tables_are_refused_naming_the_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let good = dir.path().join("good.pxo");
+        small_db(&good);
+        let db = OctreeDb::open(&good).unwrap();
+        assert_eq!(db.nodes.len(), 9);
+        assert_eq!(db.read_brick(NodeKey::root()).unwrap().unwrap()[0], 10.0);
+        type Craft = Box<dyn Fn(&Path)>;
+        let cases: Vec<(&str, Craft, &str)> = vec![
+            (
+                "zero levels",
+                Box::new(|p| craft_header(p, |h| h.layout.levels = 0)),
+                "levels 0",
+            ),
+            (
+                "zero brick",
+                Box::new(|p| craft_header(p, |h| h.layout.brick = 0)),
+                "brick 0",
+            ),
+            (
+                "huge dims",
+                Box::new(|p| {
+                    craft_header(p, |h| {
+                        h.layout.dims = [1 << 40, 8, 8];
+                        h.info.dims = [1 << 40, 8, 8];
+                    })
+                }),
+                "dims",
+            ),
+            (
+                "dims disagree",
+                Box::new(|p| craft_header(p, |h| h.info.dims = [9, 8, 8])),
+                "dims",
+            ),
+            (
+                "too many levels",
+                Box::new(|p| craft_header(p, |h| h.layout.levels = 40)),
+                "levels 40",
+            ),
+            (
+                "overlapping offsets",
+                Box::new(|p| craft_trailer(p, |t| t.nodes[2].offset = t.nodes[1].offset + 1)),
+                "overlap",
+            ),
+            (
+                "huge brick record",
+                Box::new(|p| craft_trailer(p, |t| t.nodes[1].len = u32::MAX)),
+                "brick level 1",
+            ),
+            (
+                "a node listed twice",
+                Box::new(|p| craft_trailer(p, |t| t.nodes[2].key = t.nodes[1].key)),
+                "twice",
+            ),
+            (
+                "a reversed range",
+                Box::new(|p| craft_trailer(p, |t| t.nodes[3].min = f32::NAN)),
+                "range",
+            ),
+        ];
+        for (what, craft, field) in cases {
+            let p = dir.path().join("bad.pxo");
+            std::fs::copy(&good, &p).unwrap();
+            craft(&p);
+            let e = match OctreeDb::open(&p) {
+                Ok(_) => panic!("{what}: accepted"),
+                Err(e) => format!("{e:#}"),
+            };
+            assert!(e.contains("bad.pxo") && e.contains(field), "{what}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_brick_whose_size_prefix_lies_is_refused_before_allocation() {
+        let values = vec![1.0f32; 64];
+        let mut blob = codec::encode(&values, 0.0, 2.0, BrickEncoding::U8Range);
+        blob[..4].copy_from_slice(&u32::MAX.to_le_bytes());
+        let crc = crc32fast::hash(&blob);
+        let e = codec::decode(&blob, crc, 0.0, 2.0, BrickEncoding::U8Range, 64).unwrap_err();
+        assert!(matches!(e, codec::DecodeError::Size { .. }), "{e}");
     }
 }
