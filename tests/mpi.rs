@@ -2,6 +2,7 @@
 //! projector rendered in the embedded mode; bad displays and a dead back end
 //! end with a clear error instead of a hang.
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::Duration;
@@ -11,6 +12,11 @@ fn bin() -> &'static str {
 }
 
 fn mpirun(n: usize, args: &[&str], env: &[(&str, &str)]) -> Output {
+    let args: Vec<&OsStr> = args.iter().map(OsStr::new).collect();
+    mpirun_os(n, &args, env)
+}
+
+fn mpirun_os(n: usize, args: &[&OsStr], env: &[(&str, &str)]) -> Output {
     let mut c = Command::new("timeout");
     c.arg("120")
         .arg("mpirun")
@@ -272,4 +278,220 @@ fn the_72_projector_wall_runs_with_4_back_ends() {
         .collect();
     assert_eq!(frame1.len(), 4);
     assert!(frame1.iter().all(|v| v["views"] == 18));
+}
+
+// Failures tried as a user and an attacker would: each ends cleanly, names
+// its cause, and stays inside its folder.
+
+fn stats_lines(out: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(out.join("stats.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+#[test]
+fn a_scene_in_a_folder_whose_name_is_not_utf8_renders() {
+    use std::os::unix::ffi::OsStrExt;
+    let w = World::new();
+    let folder = w.dir.path().join(OsStr::from_bytes(b"sc\xe9ne"));
+    std::fs::create_dir(&folder).unwrap();
+    let scene = folder.join("scene.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("scene.toml"))
+            .unwrap()
+            .replace("\"v.pxo\"", "\"../v.pxo\"")
+            .replace("\"tf.toml\"", "\"../tf.toml\"")
+            .replace("\"wall/", "\"../wall/"),
+    )
+    .unwrap();
+    let out = folder.join("out");
+    let args: Vec<&OsStr> = ["render", "--scene"]
+        .iter()
+        .map(OsStr::new)
+        .chain([scene.as_os_str()])
+        .chain(["--frames", "2", "--sync", "--out"].iter().map(OsStr::new))
+        .chain([out.as_os_str()])
+        .collect();
+    let start = std::time::Instant::now();
+    let o = mpirun_os(2, &args, &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(start.elapsed() < Duration::from_secs(60));
+    assert!(out.join("frame_00001/p03.png").exists());
+    // Embedded too.
+    let o = Command::new(bin()).args(&args).output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+}
+
+#[test]
+fn a_projector_id_that_is_a_path_is_refused_naming_the_file() {
+    let w = World::new();
+    let scene = w.path("scene.toml");
+    let p = w.path("wall/projectors/p01.toml");
+    let orig = std::fs::read_to_string(&p).unwrap();
+    let out = w.path("deep/er/out");
+    for id in ["../../../escaped", "a/b", ".."] {
+        std::fs::write(&p, orig.replace("\"p01\"", &format!("{id:?}"))).unwrap();
+        for o in [
+            run(&w.render_args(&out, &scene)),
+            mpirun(2, &w.render_args(&out, &scene), &[]),
+        ] {
+            assert!(!o.status.success(), "{id}: {}", text(&o));
+            let t = text(&o);
+            assert!(t.contains("p01.toml: id"), "{id}: {t}");
+        }
+    }
+    // Nothing was written anywhere above (or inside) the output folder.
+    let escaped: Vec<_> = walk(w.dir.path())
+        .into_iter()
+        .filter(|f| f.to_string_lossy().contains("escaped"))
+        .collect();
+    assert!(escaped.is_empty(), "{escaped:?}");
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        }
+        out.push(p);
+    }
+    out
+}
+
+#[test]
+fn an_upload_budget_of_4_converges_and_says_it_held_the_cut_back() {
+    let w = World::new();
+    let scene = w.path("scene4.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("scene.toml"))
+            .unwrap()
+            .replace(
+                "[render]\n",
+                "[render]\nupload_budget = 4\naccuracy = 0.1\n",
+            ),
+    )
+    .unwrap();
+    let out = w.path("budget4");
+    let o = mpirun(
+        2,
+        &[
+            "render",
+            "--scene",
+            s(&scene),
+            "--frames",
+            "40",
+            "--sync",
+            "--out",
+            s(&out),
+        ],
+        &[],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let stats = stats_lines(&out);
+    assert!(stats.iter().all(|v| v["uploaded"].as_u64().unwrap() <= 4));
+    let last = stats.last().unwrap();
+    assert_eq!(last["adequate"], true, "{last}");
+    assert!(last["cut_nodes"].as_u64().unwrap() > 9, "{last}");
+    let t = text(&o);
+    assert_eq!(t.matches("upload budget").count(), 1, "said once: {t}");
+}
+
+#[test]
+fn a_corrupt_brick_is_named_and_the_run_goes_on() {
+    use parallax_common::octree::{NodeKey, OctreeDb};
+    let w = World::new();
+    let bad = w.path("bad.pxo");
+    std::fs::copy(w.path("v.pxo"), &bad).unwrap();
+    let key = NodeKey::new(1, 1, 0, 1);
+    let rec = *OctreeDb::open(&bad).unwrap().node(key).unwrap();
+    assert!(rec.is_stored());
+    let mut bytes = std::fs::read(&bad).unwrap();
+    for b in &mut bytes[rec.offset as usize + 4..rec.offset as usize + 12] {
+        *b ^= 0x5A;
+    }
+    std::fs::write(&bad, bytes).unwrap();
+    let scene = w.path("scene-bad.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("scene.toml"))
+            .unwrap()
+            .replace("\"v.pxo\"", "\"bad.pxo\""),
+    )
+    .unwrap();
+    let out = w.path("corrupt");
+    let o = mpirun(3, &w.render_args(&out, &scene), &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(out.join("frame_00003/p00.png").exists());
+    let named: Vec<String> = stats_lines(&out)
+        .iter()
+        .flat_map(|v| v["bad_bricks"].as_array().unwrap().clone())
+        .map(|b| b.as_str().unwrap().to_string())
+        .collect();
+    assert!(!named.is_empty());
+    let want = format!("brick {key} (offset {})", rec.offset);
+    assert!(named.iter().all(|b| b.contains(&want)), "{named:?}");
+    assert!(text(&o).contains(&want), "{}", text(&o));
+    // `info --verify` still reports it.
+    let v = run(&["info", s(&bad), "--verify"]);
+    assert!(!v.status.success());
+    assert!(text(&v).contains(&want), "{}", text(&v));
+}
+
+#[test]
+fn a_panicking_back_end_is_named() {
+    let w = World::new();
+    let out = w.path("panic");
+    let start = std::time::Instant::now();
+    let o = mpirun(
+        3,
+        &w.render_args(&out, &w.path("scene.toml")),
+        &[("PARALLAX_FAULT", "panic:2:1")],
+    );
+    assert!(!o.status.success());
+    assert!(start.elapsed() < Duration::from_secs(60), "no hang");
+    let t = text(&o);
+    assert!(
+        t.contains("back end 2 failed") && t.contains("panic"),
+        "{t}"
+    );
+    // Embedded: the same error, no hang.
+    let scene = w.path("scene.toml");
+    let mut args = w.render_args(&out, &scene);
+    args.extend(["--backends", "2"]);
+    let o = Command::new(bin())
+        .args(&args)
+        .env("PARALLAX_FAULT", "panic:2:1")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(text(&o).contains("back end 2 failed"), "{}", text(&o));
+}
+
+#[test]
+fn a_stopped_back_end_is_named_within_the_watchdog_timeout() {
+    let w = World::new();
+    let out = w.path("stopped");
+    let scene = w.path("scene.toml");
+    let mut args = w.render_args(&out, &scene);
+    args.extend(["--watchdog", "5"]);
+    let start = std::time::Instant::now();
+    let o = mpirun(3, &args, &[("PARALLAX_FAULT", "stop:2:2")]);
+    let took = start.elapsed();
+    assert!(!o.status.success(), "{}", text(&o));
+    // 5 s of watchdog, plus start-up and the launcher's clean-up.
+    assert!(took < Duration::from_secs(60), "{took:?}");
+    let t = text(&o);
+    assert!(
+        t.contains("back end rank 2 did not answer within 5 s"),
+        "{t}"
+    );
+    // The frames before were written, and their figures flushed.
+    let stats = stats_lines(&out);
+    assert_eq!(stats.len(), 2 * 2, "frames 0 and 1 from two back ends");
 }

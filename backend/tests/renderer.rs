@@ -890,4 +890,45 @@ fn stress_cases_render_or_fail_clearly() {
             }
         }
     }
+
+    // 8. Budgets that hold the root but not one set of its children cannot
+    //    refine: refused, naming the smallest budget that works, which is
+    //    then accepted and refines.
+    let brick_mib = (odb.layout().stored_len() * 4) as f64 / (1 << 20) as f64;
+    for (field, small) in [
+        (
+            "render.gpu_cache_mb",
+            RenderConfig {
+                gpu_cache_mb: 8.5 * brick_mib,
+                ..cfg.clone()
+            },
+        ),
+        (
+            "render.cpu_cache_mb",
+            RenderConfig {
+                cpu_cache_mb: 7.5 * brick_mib,
+                ..cfg.clone()
+            },
+        ),
+    ] {
+        let msg = match Renderer::new(&db, &small) {
+            Ok(_) => panic!("{field} below one sibling set accepted"),
+            Err(e) => format!("{e:#}"),
+        };
+        eprintln!("small budget: {msg}");
+        assert!(
+            msg.contains(field) && msg.contains("smallest that works"),
+            "{msg}"
+        );
+        let smallest: f64 = msg.rsplit(' ').next().unwrap().parse().unwrap();
+        let mut ok = small.clone();
+        if field.contains("gpu") {
+            ok.gpu_cache_mb = smallest;
+        } else {
+            ok.cpu_cache_mb = smallest;
+        }
+        let mut r = renderer(&db, &tf, &ok);
+        let f = r.converge(&placement, &[normal], &ok, 40).unwrap();
+        assert!(f.stats.cut_nodes > 1, "{field} = {smallest}: refines");
+    }
 }

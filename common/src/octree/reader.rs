@@ -108,7 +108,7 @@ impl OctreeDb {
                     n.len
                 );
             }
-            if !(n.min <= n.max) {
+            if n.min.is_nan() || n.max.is_nan() || n.min > n.max {
                 bail!("{name}: brick {} has range [{}, {}]", n.key, n.min, n.max);
             }
             if index.insert(n.key, i).is_some() {
