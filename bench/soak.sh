@@ -34,8 +34,8 @@ value = 255
 color = [1.0, 0.8, 0.4]
 extinction = 0.4
 TF
-$px display-gen --projectors 2 --resolution 64x36 --pixel-size 0.02 \
-  --angular-accuracy 10 -o "$out/wall" > /dev/null
+$px display-gen --projectors 2 --resolution 96x54 --pixel-size 0.001 \
+  --angular-accuracy 0.2 -o "$out/wall" > /dev/null
 cat > "$out/scene.toml" <<'SC'
 volume = "shells.pxo"
 transfer_function = "tf.toml"

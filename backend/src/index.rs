@@ -42,7 +42,6 @@ pub struct IndexNode {
     pub ny: u32,
     pub nz: u32,
 }
-const _: () = assert!(std::mem::size_of::<IndexNode>() == 24);
 
 impl IndexNode {
     pub fn parent(&self) -> Option<u32> {

@@ -4,6 +4,7 @@
 
 pub mod params;
 pub mod pool;
+pub mod shader;
 
 use crate::gpu::Gpu;
 use crate::index::SpatialIndex;
@@ -15,8 +16,6 @@ use params::{GpuFrame, GpuView};
 pub use pool::BrickPool;
 use std::collections::HashMap;
 use wgpu::util::DeviceExt;
-
-pub const SHADER: &str = include_str!("../../../shaders/raycast.wgsl");
 
 /// The pre-integration table on the GPU (G10 §4 Eq. 2).
 ///
@@ -196,11 +195,12 @@ impl Raycaster {
                     .device
                     .features()
                     .contains(wgpu::Features::FLOAT32_FILTERABLE));
+        let source = shader::kernel("raycast.wgsl")?;
         let module = gpu.validated("shaders/raycast.wgsl", || {
             gpu.device
                 .create_shader_module(wgpu::ShaderModuleDescriptor {
                     label: Some("raycast.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+                    source: wgpu::ShaderSource::Wgsl(source.into()),
                 })
         })?;
         let bind_layout = gpu

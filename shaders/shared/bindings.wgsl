@@ -1,0 +1,52 @@
+// shared/bindings.wgsl: the structs every ray-casting kernel reads and their bindings.
+//
+// Rust mirrors: `IndexNode` (backend/src/index.rs), `GpuFrame`, `GpuView`
+// (backend/src/raycast/params.rs); a test checks them against naga's layout.
+
+const NONE16: u32 = 0xFFFFu;
+const NO_SLOT: u32 = 0xFFFFFFu;
+const OVERLAP: f32 = 2.0;
+const MAX_NODES_PER_RAY: u32 = 65536u;
+
+struct IndexNode {
+    tree: u32,   // parent (low 16) | first child (high 16)
+    data: u32,   // level (high 8) | pool slot (low 24)
+    range: u32,  // unorm16 min (low) | max (high) of the dataset range
+    nx: u32,     // neighbour −x (low 16) | +x (high 16)
+    ny: u32,
+    nz: u32,
+}
+
+struct GpuView {
+    region: vec4<f32>,    // x0, y0, w, h (m) on the screen plane
+    eye: vec4<f32>,       // projector / eye E (m); w = η
+    observer: vec4<f32>,  // observer V (m)
+    size: vec4<u32>,      // W, H, first pixel of this view in `image`, 0
+}
+
+struct GpuFrame {
+    rt0: vec4<f32>,       // columns of Rᵀ (display → volume rotation)
+    rt1: vec4<f32>,
+    rt2: vec4<f32>,
+    center: vec4<f32>,    // placement centre (m); w = data units per metre
+    extent: vec4<f32>,    // N·s: the volume's box (data units)
+    domain: vec4<f32>,    // B·2^L·s: the root node's box (data units)
+    spacing: vec4<f32>,   // s; w = min(s)
+    tf: vec4<f32>,        // table vmin, bin width, bins, 0
+    render: vec4<f32>,    // step factor, early-termination opacity, probe offset (root units: 1% of a source voxel), 0
+    light: vec4<f32>,     // Phong ka, kd, ks, shininess
+    counts: vec4<u32>,    // B, leaf level L, table levels, running-integral offset (0: none)
+    pool: vec4<u32>,      // slots per axis x, y, z; stored brick side B + 2·OVERLAP
+    tf_offsets: array<vec4<u32>, 8>,  // pyramid level offsets (32)
+}
+
+@group(0) @binding(0) var<uniform> frame: GpuFrame;
+@group(0) @binding(1) var<storage, read> views: array<GpuView>;
+@group(0) @binding(2) var<storage, read> index: array<IndexNode>;
+@group(0) @binding(3) var pool: texture_3d<f32>;
+@group(0) @binding(4) var<storage, read> slot_range: array<vec2<f32>>;  // (min, max − min) per slot
+// (τ, k̃r, k̃g, k̃b) interleaved: node values, then the pyramid levels.
+@group(0) @binding(5) var<storage, read> table: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> feedback: array<u32>;
+@group(0) @binding(7) var<storage, read_write> image: array<vec4<f32>>;
+@group(0) @binding(8) var pool_sampler: sampler;

@@ -1,0 +1,68 @@
+// shared/preint.wgsl: pre-integrated transfer function lookups.
+
+#import bindings
+
+// Pre-integration (G10 §4 Eq. 2) over the sum pyramid of common/src/tf
+// (or, where the table allows, its running integral as an f32 pair):
+// the average of (τ, k̃r, k̃g, k̃b) over the data segment [a, b].
+
+fn tf_offset(k: u32) -> u32 {
+    return frame.tf_offsets[k >> 2u][k & 3u];
+}
+
+fn node4(j: u32) -> vec4<f32> {
+    return table[j];
+}
+
+fn lerp4(u: f32) -> vec4<f32> {
+    let n = u32(frame.tf.z);
+    let j = min(u32(u), n - 1u);
+    let t = u - f32(j);
+    return (1.0 - t) * node4(j) + t * node4(j + 1u);
+}
+
+fn segment_average(sa: f32, sb: f32) -> vec4<f32> {
+    let n = u32(frame.tf.z);
+    var ua = clamp((sa - frame.tf.x) / frame.tf.y, 0.0, f32(n));
+    var ub = clamp((sb - frame.tf.x) / frame.tf.y, 0.0, f32(n));
+    if (ua > ub) {
+        let t = ua;
+        ua = ub;
+        ub = t;
+    }
+    let ja = min(u32(ua), n - 1u);
+    if (ub <= f32(ja + 1u)) {
+        // Same bin: the exact average of a linear function, no division
+        // (this is Eq. 2's "|s_i − s_{i−1}| ≤ ε" branch, made exact).
+        return 0.5 * (lerp4(ua) + lerp4(ub));
+    }
+    let jb = min(u32(ub), n);
+    var sum = (f32(ja + 1u) - ua) * 0.5 * (lerp4(ua) + node4(ja + 1u));
+    var lo = ja + 1u;
+    let prefix = frame.counts.w;
+    if (prefix != 0u) {
+        // Whole bins [ja+1, jb) by the running integral, an f32 pair per
+        // node: (hi_b − hi_a) + (lo_b − lo_a); exact zero for no bins.
+        let a = prefix + 2u * lo;
+        let b = prefix + 2u * jb;
+        sum = sum + (table[b] - table[a]) + (table[b + 1u] - table[a + 1u]);
+        lo = jb;
+    }
+    let top = frame.counts.z - 1u;
+    // Whole bins as aligned dyadic blocks: every term ≥ 0, nothing cancels.
+    while (lo < jb) {
+        var k = top;
+        if (lo != 0u) {
+            k = min(countTrailingZeros(lo), top);
+        }
+        while ((1u << k) > jb - lo) {
+            k = k - 1u;
+        }
+        sum = sum + table[tf_offset(k) + (lo >> k)];
+        lo = lo + (1u << k);
+    }
+    if (jb < n) {
+        sum = sum + (ub - f32(jb)) * 0.5 * (node4(jb) + lerp4(ub));
+    }
+    return sum / (ub - ua);
+}

@@ -1,0 +1,62 @@
+// shared/sampling.wgsl: brick sampling and gradients.
+
+#import bindings
+
+// Trilinear filtering by the texture unit (one sample) instead of eight
+// loads; off where the pool's format is not filterable on this device.
+override HW_FILTER: bool = false;
+
+// Brick sampling: trilinear interpolation of the stored (B+4)³ brick, by the
+// texture unit or by eight loads with exact f32 weights (the overlap keeps
+// every tap inside the slot).
+
+struct Leaf {
+    node: u32,
+    level: u32,
+    cell: vec3<f32>,   // brick coordinates at its level
+    slot: u32,
+}
+
+fn slot_origin(slot: u32) -> vec3<i32> {
+    let p = frame.pool;
+    let s = vec3<u32>(slot % p.x, (slot / p.x) % p.y, slot / (p.x * p.y));
+    return vec3<i32>(s * p.w);
+}
+
+fn tap(o: vec3<i32>, i: vec3<i32>) -> f32 {
+    return textureLoad(pool, o + i, 0).r;
+}
+
+fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
+    let scale = f32(1u << (frame.counts.y - leaf.level));
+    let voxel = frame.spacing.xyz * scale;
+    let side = f32(frame.pool.w);
+    let local = clamp(p / voxel - leaf.cell * f32(frame.counts.x) + vec3<f32>(OVERLAP - 0.5),
+                      vec3<f32>(0.0), vec3<f32>(side - 1.0));
+    let o = slot_origin(leaf.slot);
+    var v: f32;
+    if (HW_FILTER) {
+        let size = vec3<f32>(frame.pool.xyz * frame.pool.w);
+        v = textureSampleLevel(pool, pool_sampler, (vec3<f32>(o) + local + 0.5) / size, 0.0).r;
+    } else {
+        let f0 = floor(local);
+        let w = local - f0;
+        let i0 = vec3<i32>(f0);
+        let i1 = min(i0 + vec3<i32>(1), vec3<i32>(i32(frame.pool.w) - 1));
+        let c00 = mix(tap(o, i0), tap(o, vec3<i32>(i1.x, i0.y, i0.z)), w.x);
+        let c10 = mix(tap(o, vec3<i32>(i0.x, i1.y, i0.z)), tap(o, vec3<i32>(i1.x, i1.y, i0.z)), w.x);
+        let c01 = mix(tap(o, vec3<i32>(i0.x, i0.y, i1.z)), tap(o, vec3<i32>(i1.x, i0.y, i1.z)), w.x);
+        let c11 = mix(tap(o, vec3<i32>(i0.x, i1.y, i1.z)), tap(o, i1), w.x);
+        v = mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+    }
+    let r = slot_range[leaf.slot];
+    return r.x + r.y * v;
+}
+
+fn gradient(leaf: Leaf, p: vec3<f32>) -> vec3<f32> {
+    let h = frame.spacing.xyz * f32(1u << (frame.counts.y - leaf.level));
+    let gx = sample_brick(leaf, p + vec3<f32>(h.x, 0.0, 0.0)) - sample_brick(leaf, p - vec3<f32>(h.x, 0.0, 0.0));
+    let gy = sample_brick(leaf, p + vec3<f32>(0.0, h.y, 0.0)) - sample_brick(leaf, p - vec3<f32>(0.0, h.y, 0.0));
+    let gz = sample_brick(leaf, p + vec3<f32>(0.0, 0.0, h.z)) - sample_brick(leaf, p - vec3<f32>(0.0, 0.0, h.z));
+    return vec3<f32>(gx / h.x, gy / h.y, gz / h.z) * 0.5;
+}

@@ -1,0 +1,44 @@
+// shared/traversal.wgsl: stackless octree traversal over the spatial index (G08 §5, G10 §5).
+
+#import bindings
+
+// Descends from `start` to the leaf containing u (root-box units, [0,1)³).
+fn descend(start: u32, u: vec3<f32>) -> u32 {
+    var i = start;
+    loop {
+        let n = index[i];
+        let first = n.tree >> 16u;
+        if (first == NONE16) {
+            break;
+        }
+        let level = (n.data >> 24u) + 1u;
+        let c = vec3<u32>(floor(u * f32(1u << level))) & vec3<u32>(1u);
+        i = first + (c.x | (c.y << 1u) | (c.z << 2u));
+    }
+    return i;
+}
+
+fn neighbour(n: IndexNode, axis: u32, plus: bool) -> u32 {
+    var w = n.nx;
+    if (axis == 1u) {
+        w = n.ny;
+    } else if (axis == 2u) {
+        w = n.nz;
+    }
+    if (plus) {
+        return w >> 16u;
+    }
+    return w & 0xFFFFu;
+}
+
+
+fn clip_box(o: vec3<f32>, d: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
+    let inv = 1.0 / select(d, vec3<f32>(1e-30), abs(d) < vec3<f32>(1e-30));
+    let ta = (vec3<f32>(0.0) - o) * inv;
+    let tb = (hi - o) * inv;
+    let tmin = min(ta, tb);
+    let tmax = max(ta, tb);
+    let t0 = max(max(max(tmin.x, tmin.y), tmin.z), 0.0);
+    let t1 = min(min(tmax.x, tmax.y), tmax.z);
+    return vec2<f32>(t0, t1);
+}
