@@ -11,12 +11,19 @@
 //
 // The shared modules in shaders/shared/ are pulled in by `#import` lines,
 // resolved by backend/src/raycast/shader.rs (each module once, in order).
+// `#import chain` is the part made for each pipeline (G10 §5 "Custom
+// compositing behavior": one kernel per combination of stepper and
+// enhancers): the stepper (steppers/dvr or mimda: `accumulate`,
+// `terminated`), refraction or none, up to three enhancers chained
+// (`chain_start`, `chain_sample`, `chain_end`) and the constants that leave
+// out what the combination does not need.
 
 #import bindings
+#import sample
 #import preint
 #import sampling
 #import traversal
-#import composite
+#import chain
 
 // Phong shading from central-difference gradients.
 override SHADING: bool = false;
@@ -47,27 +54,33 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     // Display → volume space: p = Rᵀ(x − centre)/scale + N·s/2.
     let rt = mat3x3<f32>(frame.rt0.xyz, frame.rt1.xyz, frame.rt2.xyz);
-    let o = rt * (origin - frame.center.xyz) * frame.center.w + 0.5 * frame.extent.xyz;
-    let d = normalize(rt * dir_display);
+    var o = rt * (origin - frame.center.xyz) * frame.center.w + 0.5 * frame.extent.xyz;
+    var d = normalize(rt * dir_display);
 
-    var acc = Acc(vec3<f32>(0.0), 0.0);
-    let span = clip_box(o, d, frame.extent.xyz);
+    var acc = Acc(vec3<f32>(0.0), 0.0, 0.0);
+    var span = clip_box(o, d, frame.extent.xyz);
     if (span.y <= span.x) {
         image[out] = vec4<f32>(0.0);
         return;
     }
+    var ray: Ray;
+    ray.origin = o;
+    ray.dir = d;
+    ray.t_end = span.y;
+    ray.n_breaks = 0u;
+    chain_start(&ray);
 
     let step_factor = frame.render.x;
-    let opaque = frame.render.y;
     // A point on a face belongs to the node the ray is entering: probe a
     // hundredth of a source voxel further along every axis of travel.
-    let nudge = sign(d) * frame.render.z;
-    let inv_d = 1.0 / select(d, vec3<f32>(1e-30), abs(d) < vec3<f32>(1e-30));
+    var nudge = sign(d) * frame.render.z;
+    var inv_d = 1.0 / select(d, vec3<f32>(1e-30), abs(d) < vec3<f32>(1e-30));
     var t = span.x;
     var probe = (o + d * t) / frame.domain.xyz + nudge;
     var node = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
     var s_prev = 0.0;
     var have_prev = false;
+    var nu_prev = -1.0;
     for (var visited = 0u; visited < MAX_NODES_PER_RAY; visited = visited + 1u) {
         let n = index[node];
         let level = n.data >> 24u;
@@ -89,6 +102,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         t_exit = clamp(t_exit, t, span.y);
 
         let slot = n.data & NO_SLOT;
+        var bent = false;
         if (slot != NO_SLOT && t_exit > t) {
             let leaf = Leaf(node, level, cell, slot);
             // Sampling rate matched to the leaf's level.
@@ -99,24 +113,59 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             var tc = t;
             loop {
-                let tn = min(tc + h, t_exit);
+                var tn = min(tc + h, t_exit);
+                if (HAS_BREAKS) {
+                    tn = min(tn, next_break(&ray, tc));
+                }
                 let s = sample_brick(leaf, o + d * tn);
-                let avg = segment_average(s_prev, s);
+                let avg = segment_average(0u, frame.counts.w, s_prev, s);
+                var smp: Sample;
+                smp.pos = o + d * (0.5 * (tc + tn));
+                smp.len = tn - tc;
+                smp.dir = d;
+                smp.scalar = s;
+                smp.tau = avg.x;
+                smp.emission = avg.yzw;
+                smp.alpha_scale = 1.0;
+                smp.alpha_mix = 0.0;
+                smp.material = frame.light;
+                if (NEEDS_AUX) {
+                    let aux = segment_average(frame.aux.x, frame.aux.y, s_prev, s);
+                    smp.importance = aux.x;
+                    smp.refraction = aux.y;
+                }
+                chain_sample(&smp);
                 var shade = 1.0;
                 // A transparent segment adds nothing: no gradient needed.
-                if (SHADING && avg.x > 0.0) {
-                    let g = gradient(leaf, o + d * (0.5 * (tc + tn)));
+                if (SHADING && (smp.tau > 0.0 || smp.alpha_mix > 0.0)) {
+                    let g = gradient(leaf, smp.pos);
                     let gl = length(g);
                     if (gl > 1e-6) {
                         // Two-sided Phong with a headlight.
                         let diff = abs(dot(g / gl, d));
-                        shade = frame.light.x + frame.light.y * diff + frame.light.z * pow(diff, frame.light.w);
+                        let m = smp.material;
+                        shade = m.x + m.y * diff + m.z * pow(diff, m.w);
                     }
                 }
-                composite(&acc, avg, tn - tc, shade);
+                accumulate(&acc, segment_optics(smp, shade), smp);
                 s_prev = s;
                 tc = tn;
-                if (tc >= t_exit || acc.alpha >= opaque) {
+                if (REFRACTION) {
+                    // Snell's law where the refraction index changes, about
+                    // the gradient at the end of the segment; the ray then
+                    // goes on from there in its new direction.
+                    if (nu_prev >= 0.0 && abs(smp.refraction - nu_prev) > 1e-6) {
+                        let p = o + d * tc;
+                        let nd = snell(d, gradient(leaf, p), nu_prev, smp.refraction);
+                        if (any(nd != d)) {
+                            o = p;
+                            d = nd;
+                            bent = true;
+                        }
+                    }
+                    nu_prev = smp.refraction;
+                }
+                if (bent || tc >= t_exit || terminated(acc)) {
                     break;
                 }
             }
@@ -126,7 +175,26 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // Nothing to integrate here; the next brick restarts its segment.
             have_prev = false;
         }
-        if (last || acc.alpha >= opaque) {
+        if (REFRACTION && bent) {
+            // Start again from the bend: a new straight ray inside the same
+            // leaf (rays that leave the volume go on straight).
+            inv_d = 1.0 / select(d, vec3<f32>(1e-30), abs(d) < vec3<f32>(1e-30));
+            nudge = sign(d) * frame.render.z;
+            span = clip_box(o, d, frame.extent.xyz);
+            if (span.y <= 0.0 || terminated(acc)) {
+                break;
+            }
+            t = 0.0;
+            ray.origin = o;
+            ray.dir = d;
+            ray.t_end = span.y;
+            ray.n_breaks = 0u;
+            chain_start(&ray);
+            probe = o / frame.domain.xyz + nudge;
+            node = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+            continue;
+        }
+        if (last || terminated(acc)) {
             break;
         }
         // Leave through the exit face and follow its neighbour pointer.
@@ -148,5 +216,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         node = descend(next, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
     }
+    ray.dir = d;
+    chain_end(&ray, &acc);
     image[out] = vec4<f32>(acc.color, acc.alpha);
 }

@@ -128,6 +128,10 @@ fn handle(
             let s = setup.as_mut().context("transfer function before setup")?;
             s.renderer.set_transfer_function(version, &tf)?;
         }
+        ToBackend::Tools { version, tools } => {
+            let s = setup.as_mut().context("tools before setup")?;
+            s.renderer.set_tools(version, &tools)?;
+        }
         ToBackend::Frame(state) => {
             fault_injection(link.rank(), state.frame);
             let s = setup.as_mut().context("frame before setup")?;
@@ -157,6 +161,13 @@ fn render_frame(s: &mut Setup, state: &FrameState) -> Result<FrameStats> {
             "frame {}: transfer function version {} was never sent",
             state.frame,
             state.tf_version
+        );
+    }
+    if s.renderer.tools_version() != state.tools_version {
+        anyhow::bail!(
+            "frame {}: tool set version {} was never sent",
+            state.frame,
+            state.tools_version
         );
     }
     let views = views_for(&s.display, &s.mine, state);

@@ -5,13 +5,16 @@
 use crate::gpu::Gpu;
 use crate::index::SpatialIndex;
 use crate::loader::{Loader, LoaderConfig};
-use crate::raycast::{BrickPool, Filtering, Raycaster, RenderSettings, SceneGeometry, TfTable};
+use crate::raycast::{
+    BrickPool, Filtering, KernelKey, Raycaster, RenderSettings, SceneGeometry, TfTable, ToolParams,
+};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{Interpolation, RenderConfig, Shading};
+use parallax_common::config::{Interpolation, Mode, RenderConfig, Shading};
 use parallax_common::octree::{BrickEncoding, OctreeDb};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
+use parallax_common::tools::{Tool, MAX_ENHANCERS};
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
@@ -31,6 +34,8 @@ pub struct Renderer {
     db: Arc<OctreeDb>,
     tf: Option<ActiveTf>,
     last: Option<(SpatialIndex, Vec<u32>)>,
+    /// The tools (each an enhancer of the chain) and their version.
+    tools: (u64, Vec<Tool>),
     /// Wait for every posted read before refining (deterministic frames).
     pub sync_io: bool,
 }
@@ -99,6 +104,7 @@ impl Renderer {
             db,
             tf: None,
             last: None,
+            tools: (0, Vec::new()),
             sync_io: false,
         })
     }
@@ -128,7 +134,7 @@ impl Renderer {
         let empty = EmptinessTable::new(tf, lo, hi, bins)?;
         self.tf = Some(ActiveTf {
             version,
-            table: TfTable::new(&self.gpu, &table),
+            table: TfTable::new(&self.gpu, &table, tf.max_importance()),
             empty,
         });
         // Last frame's visibility was for another transfer function.
@@ -138,6 +144,67 @@ impl Renderer {
 
     pub fn tf_version(&self) -> Option<u64> {
         self.tf.as_ref().map(|t| t.version)
+    }
+
+    /// Installs the tools: from the next frame each drives one enhancer of
+    /// the chain, in order (G10 §4–5).
+    pub fn set_tools(&mut self, version: u64, tools: &[Tool]) -> Result<()> {
+        if tools.len() > MAX_ENHANCERS {
+            bail!(
+                "{} tools: at most {MAX_ENHANCERS} enhancers can be chained",
+                tools.len()
+            );
+        }
+        self.tools = (version, tools.to_vec());
+        Ok(())
+    }
+
+    pub fn tools_version(&self) -> u64 {
+        self.tools.0
+    }
+
+    /// Pipelines the ray caster has built (one per combination used).
+    pub fn pipeline_count(&self) -> usize {
+        self.raycaster.pipeline_count()
+    }
+
+    /// The kernel and its parameters for this frame's scene state.
+    fn settings(&self, placement: &Placement, cfg: &RenderConfig) -> RenderSettings {
+        let scene_extent = self.geometry(placement).extent();
+        let mut tools = [ToolParams::default(); MAX_ENHANCERS];
+        for (p, t) in tools.iter_mut().zip(&self.tools.1) {
+            if let Tool::ClipPlane(c) = t {
+                let v = c.in_volume(placement, scene_extent);
+                let f = |x: f64| x as f32;
+                p.a = [f(v.normal.x), f(v.normal.y), f(v.normal.z), f(v.offset)];
+                p.b = [f(v.unit.x), f(v.unit.y), f(v.unit.z), f(c.thickness)];
+                p.c = [f(c.context[0]), f(c.context[1]), 0.0, 0.0];
+            }
+        }
+        RenderSettings {
+            step_factor: cfg.step_factor as f32,
+            early_termination: cfg.early_termination as f32,
+            shading: cfg.shading == Shading::Phong,
+            kernel: KernelKey {
+                mimda: cfg.mode == Mode::Mimda,
+                refraction: cfg.refraction,
+                enhancers: self.tools.1.iter().map(Tool::enhancer).collect(),
+            },
+            gamma: if cfg.mode == Mode::Mimda {
+                cfg.gamma as f32
+            } else {
+                0.0
+            },
+            tools,
+        }
+    }
+
+    fn geometry(&self, placement: &Placement) -> SceneGeometry {
+        SceneGeometry {
+            placement: *placement,
+            layout: *self.db.layout(),
+            spacing: self.db.header.info.spacing,
+        }
     }
 
     /// Renders one frame of `views`.
@@ -182,16 +249,8 @@ impl Renderer {
         let index = SpatialIndex::build(&cut.cut, (s.value_min, s.value_max))?;
         stats.index_ms = ms(t);
 
-        let scene = SceneGeometry {
-            placement: *placement,
-            layout: *self.db.layout(),
-            spacing: self.db.header.info.spacing,
-        };
-        let settings = RenderSettings {
-            step_factor: cfg.step_factor as f32,
-            early_termination: cfg.early_termination as f32,
-            shading: cfg.shading == Shading::Phong,
-        };
+        let scene = self.geometry(placement);
+        let settings = self.settings(placement, cfg);
         let t = Instant::now();
         let out = self.raycaster.render(
             &self.gpu, &self.pool, &index, &tf.table, &scene, views, &settings,

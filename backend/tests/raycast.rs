@@ -112,7 +112,7 @@ fn measure(
     let range = (s.db.summary.value_min, s.db.summary.value_max);
     let (lo, hi) = (range.0 as f64, range.1 as f64);
     let table = PreintTable::new(f, lo, hi, PreintTable::suggested_bins(lo, hi, true)).unwrap();
-    let gtf = TfTable::new(gpu, &table);
+    let gtf = TfTable::new(gpu, &table, f.max_importance());
     let index = SpatialIndex::build(cut, range).unwrap();
     let sc = scene(&s.db);
     let view = View::window([40, 32], [0.4, 0.32], [0.02, 0.01, 0.8]);
@@ -120,6 +120,7 @@ fn measure(
         step_factor: 0.125,
         early_termination: 1.0,
         shading: false,
+        ..Default::default()
     };
     let mut out = rc
         .render(gpu, pool, &index, &gtf, &sc, &[view], &settings)
@@ -223,7 +224,7 @@ fn traversal_covers_every_path_exactly_once() {
     let f =
         TransferFunction::from_points(vec![ControlPoint::new(0.0, [1.0, 0.5, 0.25], tau)]).unwrap();
     let table = PreintTable::new(&f, 0.0, 255.0, 255).unwrap();
-    let gtf = TfTable::new(&gpu, &table);
+    let gtf = TfTable::new(&gpu, &table, f.max_importance());
     let (cut, pool) = full_cut(&gpu, &db, true);
     let index = SpatialIndex::build(&cut, (100.0, 100.0)).unwrap();
     for rot in [
@@ -254,6 +255,7 @@ fn traversal_covers_every_path_exactly_once() {
                     step_factor: 0.5,
                     early_termination: 1.0,
                     shading: false,
+                    ..Default::default()
                 },
             )
             .unwrap();

@@ -80,6 +80,10 @@ pub struct RenderConfig {
     /// Brick interpolation: by the texture unit, or exact (eight loads).
     #[serde(default = "hardware")]
     pub interpolation: Interpolation,
+    /// Continuous refraction by Snell's law from the transfer function's
+    /// refraction index (G10 §4).
+    #[serde(default)]
+    pub refraction: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -143,6 +147,9 @@ pub struct Scene {
     /// The display to render for when none is given on the command line.
     #[serde(default, with = "crate::paths::opt_bytes")]
     pub display: Option<PathBuf>,
+    /// `[[tool]]` tables: the tools, each driving one enhancer (G10 §4).
+    #[serde(default, rename = "tool")]
+    pub tools: Vec<crate::tools::Tool>,
 }
 
 impl Scene {
@@ -201,14 +208,19 @@ impl Scene {
                 bail!("{}: {name} must be ≥ 0 (got {v})", f.display());
             }
         }
-        if r.mode != Mode::Dvr || r.gamma != 0.0 {
-            bail!(
-                "{}: render.mode = {:?} with gamma {} is not available in this version (only \"dvr\")",
+        match r.mode {
+            Mode::Iso => bail!(
+                "{}: render.mode = \"iso\" is not available in this version (\"dvr\" or \"mimda\")",
+                f.display()
+            ),
+            Mode::Dvr if r.gamma != 0.0 => bail!(
+                "{}: render.gamma = {} applies to mode = \"mimda\" (G10 Eq. 3); with \"dvr\" it must be 0",
                 f.display(),
-                r.mode,
                 r.gamma
-            );
+            ),
+            _ => {}
         }
+        crate::tools::check_tools(&s.tools, f)?;
         Ok(s)
     }
 }

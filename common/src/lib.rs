@@ -5,6 +5,7 @@
 //! * [`protocol`]: the messages between the front end and the back ends.
 //! * [`volume`]: scalar volumes and slice-by-slice sources.
 //! * [`tf`]: transfer functions and their pre-integration tables (G10 §4).
+//! * [`tools`]: tools (clip plane, …) and the enhancers they drive (G10 §4).
 //! * [`wall`]: generated light field walls (G10 §6).
 //! * [`paths`]: paths as bytes on the wire, names checked before they become files.
 //! * [`octree`]: the out-of-core octree database (`.pxo`) (G10 §5, G08 §3).
@@ -15,5 +16,6 @@ pub mod octree;
 pub mod paths;
 pub mod protocol;
 pub mod tf;
+pub mod tools;
 pub mod volume;
 pub mod wall;

@@ -28,6 +28,9 @@ pub struct FrameState {
     pub render: RenderConfig,
     /// Which transfer function (sent earlier) to use.
     pub tf_version: u64,
+    /// Which tool set (sent earlier) to use.
+    #[serde(default)]
+    pub tools_version: u64,
 }
 
 /// Large state, sent once and again only when it changes.
@@ -48,6 +51,12 @@ pub enum ToBackend {
     TransferFunction {
         version: u64,
         tf: TransferFunction,
+    },
+    /// The tools (each an enhancer of the ray caster), sent when they
+    /// change.
+    Tools {
+        version: u64,
+        tools: Vec<crate::tools::Tool>,
     },
     Frame(FrameState),
     Quit,
@@ -315,6 +324,7 @@ mod tests {
             eta: 1.0,
             render: RenderConfig::default(),
             tf_version: 1,
+            tools_version: 1,
         };
         let msg = ToBackend::Frame(s.clone());
         let b = encode(&msg).unwrap();
@@ -399,6 +409,7 @@ mod tests {
             eta: 0.0,
             render: RenderConfig::default(),
             tf_version: 0,
+            tools_version: 0,
         };
         t.broadcast(&ToBackend::Frame(f)).unwrap();
         let stats = t.gather().unwrap();

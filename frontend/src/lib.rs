@@ -102,6 +102,10 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         sync_io: opts.sync_io,
     })?;
     transport.broadcast(&ToBackend::TransferFunction { version: 1, tf })?;
+    transport.broadcast(&ToBackend::Tools {
+        version: 1,
+        tools: scene.tools.clone(),
+    })?;
     let script = opts.script.as_deref().map(Script::load).transpose()?;
     let frames = match (opts.frames, &script) {
         (0, Some(s)) => s.frames,
@@ -120,6 +124,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             eta: scene.render.eta,
             render: scene.render.clone(),
             tf_version,
+            tools_version: 1,
         };
         if let Some(sc) = &script {
             let st = sc.at(

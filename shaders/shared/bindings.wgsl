@@ -37,7 +37,18 @@ struct GpuFrame {
     light: vec4<f32>,     // Phong ka, kd, ks, shininess
     counts: vec4<u32>,    // B, leaf level L, table levels, running-integral offset (0: none)
     pool: vec4<u32>,      // slots per axis x, y, z; stored brick side B + 2·OVERLAP
+    optics: vec4<f32>,    // MImDA γ, the transfer function's largest importance, 0, 0
+    aux: vec4<u32>,       // (ι, ν, 0, 0) table: first entry, running-integral offset (0: none), 0, 0
     tf_offsets: array<vec4<u32>, 8>,  // pyramid level offsets (32)
+}
+
+// A tool's constant parameters (their meaning is the enhancer's: see
+// shaders/enhancers/).
+struct ToolParams {
+    a: vec4<f32>,
+    b: vec4<f32>,
+    c: vec4<f32>,
+    d: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: GpuFrame;
@@ -50,3 +61,4 @@ struct GpuFrame {
 @group(0) @binding(6) var<storage, read_write> feedback: array<u32>;
 @group(0) @binding(7) var<storage, read_write> image: array<vec4<f32>>;
 @group(0) @binding(8) var pool_sampler: sampler;
+@group(0) @binding(9) var<uniform> tools: array<ToolParams, 3>;

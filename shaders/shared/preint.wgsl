@@ -4,24 +4,23 @@
 
 // Pre-integration (G10 §4 Eq. 2) over the sum pyramid of common/src/tf
 // (or, where the table allows, its running integral as an f32 pair):
-// the average of (τ, k̃r, k̃g, k̃b) over the data segment [a, b].
+// the average of four interleaved attributes over the data segment [a, b]:
+// (τ, k̃r, k̃g, k̃b) in the table at `base` 0, (ι, ν, 0, 0) at `frame.aux.x`
+// (G10 §4: "we employ preintegration for all attributes"). `prefix` is where
+// that part's running integral starts, 0 when it has none.
 
 fn tf_offset(k: u32) -> u32 {
     return frame.tf_offsets[k >> 2u][k & 3u];
 }
 
-fn node4(j: u32) -> vec4<f32> {
-    return table[j];
-}
-
-fn lerp4(u: f32) -> vec4<f32> {
+fn lerp4(base: u32, u: f32) -> vec4<f32> {
     let n = u32(frame.tf.z);
     let j = min(u32(u), n - 1u);
     let t = u - f32(j);
-    return (1.0 - t) * node4(j) + t * node4(j + 1u);
+    return (1.0 - t) * table[base + j] + t * table[base + j + 1u];
 }
 
-fn segment_average(sa: f32, sb: f32) -> vec4<f32> {
+fn segment_average(base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
     let n = u32(frame.tf.z);
     var ua = clamp((sa - frame.tf.x) / frame.tf.y, 0.0, f32(n));
     var ub = clamp((sb - frame.tf.x) / frame.tf.y, 0.0, f32(n));
@@ -34,12 +33,11 @@ fn segment_average(sa: f32, sb: f32) -> vec4<f32> {
     if (ub <= f32(ja + 1u)) {
         // Same bin: the exact average of a linear function, no division
         // (this is Eq. 2's "|s_i − s_{i−1}| ≤ ε" branch, made exact).
-        return 0.5 * (lerp4(ua) + lerp4(ub));
+        return 0.5 * (lerp4(base, ua) + lerp4(base, ub));
     }
     let jb = min(u32(ub), n);
-    var sum = (f32(ja + 1u) - ua) * 0.5 * (lerp4(ua) + node4(ja + 1u));
+    var sum = (f32(ja + 1u) - ua) * 0.5 * (lerp4(base, ua) + table[base + ja + 1u]);
     var lo = ja + 1u;
-    let prefix = frame.counts.w;
     if (prefix != 0u) {
         // Whole bins [ja+1, jb) by the running integral, an f32 pair per
         // node: (hi_b − hi_a) + (lo_b − lo_a); exact zero for no bins.
@@ -58,11 +56,11 @@ fn segment_average(sa: f32, sb: f32) -> vec4<f32> {
         while ((1u << k) > jb - lo) {
             k = k - 1u;
         }
-        sum = sum + table[tf_offset(k) + (lo >> k)];
+        sum = sum + table[base + tf_offset(k) + (lo >> k)];
         lo = lo + (1u << k);
     }
     if (jb < n) {
-        sum = sum + (ub - f32(jb)) * 0.5 * (node4(jb) + lerp4(ub));
+        sum = sum + (ub - f32(jb)) * 0.5 * (table[base + jb] + lerp4(base, ub));
     }
     return sum / (ub - ua);
 }

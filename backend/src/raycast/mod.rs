@@ -12,8 +12,11 @@ use anyhow::{bail, Result};
 use parallax_common::camera::{Placement, View, MAX_FRAME_PIXELS, MAX_VIEW_SIDE};
 use parallax_common::octree::OctreeLayout;
 use parallax_common::tf::{Channel, PreintLayout, PreintTable};
+use parallax_common::tools::MAX_ENHANCERS;
+pub use params::ToolParams;
 use params::{GpuFrame, GpuView};
 pub use pool::BrickPool;
+pub use shader::KernelKey;
 use std::collections::HashMap;
 use wgpu::util::DeviceExt;
 
@@ -32,6 +35,11 @@ pub struct TfTable {
     layout: PreintLayout,
     /// Index (in vec4 entries) of the F_j pairs, 0 when not used.
     prefix_offset: u32,
+    /// First entry of the (ι, ν, 0, 0) part and its running integral's.
+    aux_base: u32,
+    aux_prefix: u32,
+    /// ι_max of the transfer function (MImDA's termination estimate).
+    max_importance: f32,
 }
 
 /// Largest F_total / (smallest non-zero bin) for which the running integral
@@ -39,21 +47,73 @@ pub struct TfTable {
 const PREFIX_RANGE: f64 = (1u64 << 20) as f64;
 
 impl TfTable {
-    pub fn new(gpu: &Gpu, table: &PreintTable) -> Self {
+    pub fn new(gpu: &Gpu, table: &PreintTable, max_importance: f64) -> Self {
         let (planar, layout) = table.gpu_layout();
-        // Interleave (τ, k̃r, k̃g, k̃b) so that one segment lookup is one
-        // 16-byte load per table entry (ι and ν are not used by DVR).
+        // Two interleaved parts with the same layout: (τ, k̃r, k̃g, k̃b), what
+        // DVR reads, one 16-byte load per table entry; then (ι, ν, 0, 0),
+        // read only by the MImDA and refraction kernels.
+        let mut data = Vec::new();
+        let prefix_offset = Self::push_part(
+            &mut data,
+            &planar,
+            &layout,
+            table,
+            [
+                Some(Channel::Tau),
+                Some(Channel::EmissionR),
+                Some(Channel::EmissionG),
+                Some(Channel::EmissionB),
+            ],
+        );
+        let aux_base = data.len() as u32;
+        let aux_prefix = Self::push_part(
+            &mut data,
+            &planar,
+            &layout,
+            table,
+            [
+                Some(Channel::Importance),
+                Some(Channel::Refraction),
+                None,
+                None,
+            ],
+        );
+        let buffer = gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("pre-integration table"),
+                contents: bytemuck::cast_slice(&data),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+        TfTable {
+            buffer,
+            layout,
+            prefix_offset,
+            aux_base,
+            aux_prefix,
+            max_importance: max_importance as f32,
+        }
+    }
+
+    /// Appends one part (four channels interleaved, nodes and pyramid) and,
+    /// where the channels' range allows, its running integral; returns the
+    /// running integral's first entry (0: none).
+    fn push_part(
+        data: &mut Vec<[f32; 4]>,
+        planar: &[f32],
+        layout: &PreintLayout,
+        table: &PreintTable,
+        channels: [Option<Channel>; 4],
+    ) -> u32 {
         let stride = layout.channel_stride as usize;
-        let mut data: Vec<[f32; 4]> = (0..stride)
-            .map(|i| std::array::from_fn(|c| planar[c * stride + i]))
+        data.extend((0..stride).map(|i| {
+            std::array::from_fn(|c| channels[c].map_or(0.0, |ch| planar[ch.index() * stride + i]))
+        }));
+        let bins: Vec<&[f64]> = channels
+            .iter()
+            .map(|c| c.map_or(&[][..], |ch| table.level(ch, 0)))
             .collect();
-        let channels = [
-            Channel::Tau,
-            Channel::EmissionR,
-            Channel::EmissionG,
-            Channel::EmissionB,
-        ];
-        let bins: Vec<&[f64]> = channels.iter().map(|&c| table.level(c, 0)).collect();
+        let n = table.level(Channel::Tau, 0).len();
         let range = bins
             .iter()
             .map(|b| {
@@ -70,34 +130,23 @@ impl TfTable {
                 }
             })
             .fold(1.0, f64::max);
-        let mut prefix_offset = 0;
-        if range <= PREFIX_RANGE {
-            prefix_offset = data.len() as u32;
-            let mut f = [0f64; 4];
-            for j in 0..=bins[0].len() {
-                let hi: [f32; 4] = std::array::from_fn(|c| f[c] as f32);
-                let lo: [f32; 4] = std::array::from_fn(|c| (f[c] - hi[c] as f64) as f32);
-                data.push(hi);
-                data.push(lo);
-                if j < bins[0].len() {
-                    for c in 0..4 {
-                        f[c] += bins[c][j];
-                    }
+        if range > PREFIX_RANGE {
+            return 0;
+        }
+        let start = data.len() as u32;
+        let mut f = [0f64; 4];
+        for j in 0..=n {
+            let hi: [f32; 4] = std::array::from_fn(|c| f[c] as f32);
+            let lo: [f32; 4] = std::array::from_fn(|c| (f[c] - hi[c] as f64) as f32);
+            data.push(hi);
+            data.push(lo);
+            if j < n {
+                for c in 0..4 {
+                    f[c] += bins[c].get(j).copied().unwrap_or(0.0);
                 }
             }
         }
-        let buffer = gpu
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("pre-integration table"),
-                contents: bytemuck::cast_slice(&data),
-                usage: wgpu::BufferUsages::STORAGE,
-            });
-        TfTable {
-            buffer,
-            layout,
-            prefix_offset,
-        }
+        start
     }
 
     /// Whether whole bins are summed by the running integral.
@@ -106,8 +155,8 @@ impl TfTable {
     }
 }
 
-/// Quality knobs of the ray caster.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Quality knobs of the ray caster, and the kernel a frame uses.
+#[derive(Clone, Debug, PartialEq)]
 pub struct RenderSettings {
     /// Step length as a fraction of the leaf's voxel size.
     pub step_factor: f32,
@@ -115,6 +164,12 @@ pub struct RenderSettings {
     pub early_termination: f32,
     /// Phong shading from central-difference gradients.
     pub shading: bool,
+    /// Stepper and enhancer chain (G10 §5: one kernel per combination).
+    pub kernel: KernelKey,
+    /// MImDA γ (G10 Eq. 3).
+    pub gamma: f32,
+    /// The enhancers' constant parameters, in chain order.
+    pub tools: [ToolParams; MAX_ENHANCERS],
 }
 
 impl Default for RenderSettings {
@@ -123,6 +178,9 @@ impl Default for RenderSettings {
             step_factor: 0.5,
             early_termination: 0.99,
             shading: false,
+            kernel: KernelKey::default(),
+            gamma: 0.0,
+            tools: [ToolParams::default(); MAX_ENHANCERS],
         }
     }
 }
@@ -152,14 +210,16 @@ pub struct Rendered {
 }
 
 pub struct Raycaster {
-    module: wgpu::ShaderModule,
     bind_layout: wgpu::BindGroupLayout,
     pipeline_layout: wgpu::PipelineLayout,
     sampler: wgpu::Sampler,
     hw_filter: bool,
-    /// One pipeline per active combination of options (G10 §5: a kernel
-    /// specialised for what the scene uses).
-    pipelines: HashMap<bool, wgpu::ComputePipeline>,
+    /// One pipeline per combination of stepper, enhancers and shading that
+    /// a frame has used (G10 §5: a kernel specialised for what the scene
+    /// uses), built when first needed.
+    pipelines: HashMap<(KernelKey, bool), wgpu::ComputePipeline>,
+    /// A small uniform buffer for the enhancers' parameters.
+    tools: wgpu::Buffer,
 }
 
 /// How bricks are interpolated.
@@ -195,14 +255,6 @@ impl Raycaster {
                     .device
                     .features()
                     .contains(wgpu::Features::FLOAT32_FILTERABLE));
-        let source = shader::kernel("raycast.wgsl")?;
-        let module = gpu.validated("shaders/raycast.wgsl", || {
-            gpu.device
-                .create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some("raycast.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(source.into()),
-                })
-        })?;
         let bind_layout = gpu
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -246,6 +298,16 @@ impl Raycaster {
                         }),
                         count: None,
                     },
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 9,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Uniform,
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                        count: None,
+                    },
                 ],
             });
         let filter = if hw_filter {
@@ -266,13 +328,19 @@ impl Raycaster {
                 bind_group_layouts: &[Some(&bind_layout)],
                 immediate_size: 0,
             });
+        let tools = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tool parameters"),
+            size: std::mem::size_of::<[ToolParams; MAX_ENHANCERS]>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         Ok(Raycaster {
-            module,
             bind_layout,
             pipeline_layout,
             sampler,
             hw_filter,
             pipelines: HashMap::new(),
+            tools,
         })
     }
 
@@ -281,8 +349,23 @@ impl Raycaster {
         self.hw_filter
     }
 
-    fn pipeline(&mut self, gpu: &Gpu, shading: bool) -> Result<&wgpu::ComputePipeline> {
-        if !self.pipelines.contains_key(&shading) {
+    /// The pipeline of a kernel combination, built on first use.
+    fn pipeline(
+        &mut self,
+        gpu: &Gpu,
+        kernel: &KernelKey,
+        shading: bool,
+    ) -> Result<&wgpu::ComputePipeline> {
+        let key = (kernel.clone(), shading);
+        if !self.pipelines.contains_key(&key) {
+            let source = shader::kernel(kernel)?;
+            let module = gpu.validated("shaders/raycast.wgsl", || {
+                gpu.device
+                    .create_shader_module(wgpu::ShaderModuleDescriptor {
+                        label: Some("raycast.wgsl"),
+                        source: wgpu::ShaderSource::Wgsl(source.into()),
+                    })
+            })?;
             let flag = |b: bool| if b { 1.0 } else { 0.0 };
             let constants = [
                 ("SHADING", flag(shading)),
@@ -293,7 +376,7 @@ impl Raycaster {
                     .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                         label: Some("raycast"),
                         layout: Some(&self.pipeline_layout),
-                        module: &self.module,
+                        module: &module,
                         entry_point: Some("main"),
                         compilation_options: wgpu::PipelineCompilationOptions {
                             constants: &constants,
@@ -302,9 +385,14 @@ impl Raycaster {
                         cache: None,
                     })
             })?;
-            self.pipelines.insert(shading, p);
+            self.pipelines.insert(key.clone(), p);
         }
-        Ok(&self.pipelines[&shading])
+        Ok(&self.pipelines[&key])
+    }
+
+    /// Pipelines built so far (one per combination used).
+    pub fn pipeline_count(&self) -> usize {
+        self.pipelines.len()
     }
 
     /// Renders all `views` of a frame.
@@ -448,11 +536,19 @@ impl Raycaster {
                     binding: 8,
                     resource: wgpu::BindingResource::Sampler(&self.sampler),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 9,
+                    resource: self.tools.as_entire_binding(),
+                },
             ],
         });
+        gpu.queue
+            .write_buffer(&self.tools, 0, bytemuck::cast_slice(&settings.tools));
         let max_w = views.iter().map(|v| v.resolution[0]).max().unwrap_or(0);
         let max_h = views.iter().map(|v| v.resolution[1]).max().unwrap_or(0);
-        let pipeline = self.pipeline(gpu, settings.shading)?.clone();
+        let pipeline = self
+            .pipeline(gpu, &settings.kernel, settings.shading)?
+            .clone();
         let mut enc = dev.create_command_encoder(&Default::default());
         // One zeroing per frame for all views (G10 §5).
         enc.clear_buffer(&feedback_buf, 0, None);
@@ -553,6 +649,8 @@ impl Raycaster {
                 tf.prefix_offset,
             ],
             pool: [pool.grid[0], pool.grid[1], pool.grid[2], pool.side],
+            optics: [s.gamma, tf.max_importance, 0.0, 0.0],
+            aux: [tf.aux_base, tf.aux_prefix, 0, 0],
             tf_offsets,
         }
     }

@@ -41,5 +41,20 @@ pub struct GpuFrame {
     pub counts: [u32; 4],
     /// slots per axis x, y, z; stored brick side.
     pub pool: [u32; 4],
+    /// MImDA γ, the transfer function's largest importance.
+    pub optics: [f32; 4],
+    /// (ι, ν) table: first entry, running-integral offset (0: none).
+    pub aux: [u32; 4],
     pub tf_offsets: [[u32; 4]; 8],
+}
+
+/// WGSL `ToolParams`: one tool's constant parameters (meaning per enhancer,
+/// see `shaders/enhancers/`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ToolParams {
+    pub a: [f32; 4],
+    pub b: [f32; 4],
+    pub c: [f32; 4],
+    pub d: [f32; 4],
 }

@@ -1,19 +1,31 @@
 //! The ray-casting shaders as WGSL modules (the way vello organises its
-//! shaders): shared modules in `shaders/shared/` — bindings, pre-integration,
-//! sampling, traversal, compositing — and one file per kernel in `shaders/`,
-//! which pulls modules in with `#import <name>` lines. [`compose`] resolves
-//! the imports exactly as the pipelines get them: each module once, where it
-//! is first imported, its own imports first. A test parses and validates
-//! every kernel and every override combination with naga without a GPU, and
-//! checks the Rust mirrors of GPU structs against naga's layout.
+//! shaders): shared modules in `shaders/shared/` — bindings, the sample
+//! state, pre-integration, sampling, traversal, compositing — steppers in
+//! `shaders/steppers/`, enhancers in `shaders/enhancers/`, and the kernel
+//! `shaders/raycast.wgsl`, which pulls modules in with `#import <name>` lines.
+//!
+//! G10 §5 "Custom compositing behavior": one kernel per combination of
+//! stepper and enhancers. [`KernelKey`] names a combination; [`kernel`]
+//! composes its source: the `chain` module is written for the key (the
+//! stepper, the enhancers instantiated in chain order, and constants that
+//! leave out what the combination does not need), then every `#import` is
+//! resolved, each module once. A test parses and validates every
+//! combination a scene can ask for with naga, without a GPU, and checks the
+//! Rust mirrors of GPU structs against naga's layout.
 
 use anyhow::{bail, Result};
+use parallax_common::tools::{EnhancerKind, MAX_ENHANCERS};
+use std::fmt::Write;
 
-/// The shared modules, by import name.
+/// The importable modules, by name.
 pub const MODULES: &[(&str, &str)] = &[
     (
         "bindings",
         include_str!("../../../shaders/shared/bindings.wgsl"),
+    ),
+    (
+        "sample",
+        include_str!("../../../shaders/shared/sample.wgsl"),
     ),
     (
         "preint",
@@ -31,30 +43,150 @@ pub const MODULES: &[(&str, &str)] = &[
         "composite",
         include_str!("../../../shaders/shared/composite.wgsl"),
     ),
+    ("dvr", include_str!("../../../shaders/steppers/dvr.wgsl")),
+    (
+        "mimda",
+        include_str!("../../../shaders/steppers/mimda.wgsl"),
+    ),
+    (
+        "refraction",
+        include_str!("../../../shaders/steppers/refraction.wgsl"),
+    ),
 ];
 
-/// The kernels: (file name, source).
-pub const KERNELS: &[(&str, &str)] = &[(
-    "raycast.wgsl",
-    include_str!("../../../shaders/raycast.wgsl"),
-)];
+/// The enhancers, by kind: templates whose `ENH_` names and `ENH_INDEX`
+/// are replaced per instance.
+fn enhancer_source(kind: EnhancerKind) -> &'static str {
+    match kind {
+        EnhancerKind::PassThrough => include_str!("../../../shaders/enhancers/pass-through.wgsl"),
+        EnhancerKind::ClipPlane => include_str!("../../../shaders/enhancers/clip-plane.wgsl"),
+        EnhancerKind::ExitDirection => {
+            include_str!("../../../shaders/enhancers/exit-direction.wgsl")
+        }
+    }
+}
 
-/// The pipeline-overridable constants of each kernel and the values a scene
-/// can ask for: every combination is a pipeline the renderer may build.
-pub const OVERRIDES: &[(&str, &[&str])] = &[("raycast.wgsl", &["SHADING", "HW_FILTER"])];
+const KERNEL: &str = include_str!("../../../shaders/raycast.wgsl");
+
+/// The pipeline-overridable constants of the kernel (each is also part of
+/// a pipeline's identity).
+pub const OVERRIDES: &[&str] = &["SHADING", "HW_FILTER"];
+
+/// One specialised kernel: the stepper and the enhancer chain.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
+pub struct KernelKey {
+    /// MImDA compositing (G10 Eq. 3) instead of plain DVR.
+    pub mimda: bool,
+    /// Continuous refraction (G10 §4).
+    pub refraction: bool,
+    /// Enhancers in chain order (at most [`MAX_ENHANCERS`]).
+    pub enhancers: Vec<EnhancerKind>,
+}
+
+impl KernelKey {
+    /// Every combination a scene can ask for.
+    pub fn all() -> Vec<KernelKey> {
+        let mut chains: Vec<Vec<EnhancerKind>> = vec![vec![]];
+        let mut last = vec![vec![]];
+        for _ in 0..MAX_ENHANCERS {
+            let next: Vec<Vec<EnhancerKind>> = last
+                .iter()
+                .flat_map(|c: &Vec<EnhancerKind>| {
+                    EnhancerKind::ALL.iter().map(move |&k| {
+                        let mut c = c.clone();
+                        c.push(k);
+                        c
+                    })
+                })
+                .collect();
+            chains.extend(next.iter().cloned());
+            last = next;
+        }
+        let mut out = Vec::new();
+        for mimda in [false, true] {
+            for refraction in [false, true] {
+                for e in &chains {
+                    out.push(KernelKey {
+                        mimda,
+                        refraction,
+                        enhancers: e.clone(),
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// The `chain` module of this combination.
+    pub fn chain_module(&self) -> Result<String> {
+        if self.enhancers.len() > MAX_ENHANCERS {
+            bail!(
+                "{} enhancers: at most {MAX_ENHANCERS} can be chained",
+                self.enhancers.len()
+            );
+        }
+        let has = |k: EnhancerKind| self.enhancers.contains(&k);
+        let clip = has(EnhancerKind::ClipPlane);
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "// The chain of this pipeline: {} stepper, refraction {}, enhancers {:?}.",
+            if self.mimda { "MImDA" } else { "DVR" },
+            if self.refraction { "on" } else { "off" },
+            self.enhancers
+        );
+        s.push_str("#import sample\n#import composite\n#import refraction\n");
+        s.push_str(if self.mimda {
+            "#import mimda\n"
+        } else {
+            "#import dvr\n"
+        });
+        let _ = writeln!(s, "const HAS_BREAKS: bool = {clip};");
+        let _ = writeln!(s, "const MODIFIES_OPTICS: bool = {clip};");
+        let _ = writeln!(
+            s,
+            "const NEEDS_AUX: bool = {};",
+            self.mimda || self.refraction
+        );
+        let _ = writeln!(s, "const REFRACTION: bool = {};", self.refraction);
+        for (i, &k) in self.enhancers.iter().enumerate() {
+            let text = enhancer_source(k)
+                .replace("ENH_INDEX", &format!("{i}u"))
+                .replace("ENH_", &format!("enh{i}_"));
+            s.push_str(&text);
+        }
+        let calls = |stage: &str, args: &str| -> String {
+            (0..self.enhancers.len())
+                .map(|i| format!("    enh{i}_{stage}({args});\n"))
+                .collect()
+        };
+        let _ = write!(
+            s,
+            "fn chain_start(ray: ptr<function, Ray>) {{\n{}}}\n\
+             fn chain_sample(smp: ptr<function, Sample>) {{\n{}}}\n\
+             fn chain_end(ray: ptr<function, Ray>, acc: ptr<function, Acc>) {{\n{}}}\n",
+            calls("start", "ray"),
+            calls("sample", "smp"),
+            calls("end", "ray, acc")
+        );
+        Ok(s)
+    }
+}
 
 /// `src` with every `#import name` line replaced by that module (and the
-/// modules it imports), each module included once.
-pub fn compose(name: &str, src: &str) -> Result<String> {
+/// modules it imports), each module included once; `extra` adds modules
+/// (the generated chain).
+pub fn compose(name: &str, src: &str, extra: &[(&str, &str)]) -> Result<String> {
     let mut out = String::with_capacity(src.len() * 4);
     let mut done = Vec::new();
-    expand(name, src, &mut done, &mut Vec::new(), &mut out)?;
+    expand(name, src, extra, &mut done, &mut Vec::new(), &mut out)?;
     Ok(out)
 }
 
 fn expand<'a>(
     name: &'a str,
     src: &'a str,
+    extra: &[(&'a str, &'a str)],
     done: &mut Vec<&'a str>,
     stack: &mut Vec<&'a str>,
     out: &mut String,
@@ -76,22 +208,24 @@ fn expand<'a>(
                 stack.join(" → ")
             );
         }
-        let Some(&(m, text)) = MODULES.iter().find(|(n, _)| *n == module) else {
-            bail!("{name}: `#import {module}`: no module shaders/shared/{module}.wgsl");
+        let Some(&(m, text)) = MODULES
+            .iter()
+            .chain(extra.iter())
+            .find(|(n, _)| *n == module)
+        else {
+            bail!("{name}: `#import {module}`: no such module");
         };
-        expand(m, text, done, stack, out)?;
+        expand(m, text, extra, done, stack, out)?;
         done.push(m);
     }
     stack.pop();
     Ok(())
 }
 
-/// A kernel's composed source, by file name.
-pub fn kernel(file: &str) -> Result<String> {
-    match KERNELS.iter().find(|(n, _)| *n == file) {
-        Some((n, src)) => compose(n, src),
-        None => bail!("no kernel shaders/{file}"),
-    }
+/// The composed source of a kernel combination.
+pub fn kernel(key: &KernelKey) -> Result<String> {
+    let chain = key.chain_module()?;
+    compose("raycast.wgsl", KERNEL, &[("chain", &chain)])
 }
 
 #[cfg(test)]
@@ -99,79 +233,100 @@ mod tests {
     use super::*;
     use wgpu::naga;
 
-    fn parse(file: &str, src: &str) -> naga::Module {
+    fn parse(what: &str, src: &str) -> naga::Module {
         naga::front::wgsl::parse_str(src)
-            .unwrap_or_else(|e| panic!("{file}:\n{}", e.emit_to_string(src)))
+            .unwrap_or_else(|e| panic!("{what}:\n{}", e.emit_to_string(src)))
     }
 
-    fn validate(file: &str, src: &str, m: &naga::Module) -> naga::valid::ModuleInfo {
+    fn validate(what: &str, src: &str, m: &naga::Module) -> naga::valid::ModuleInfo {
         naga::valid::Validator::new(
             naga::valid::ValidationFlags::all(),
             naga::valid::Capabilities::all(),
         )
         .validate(m)
-        .unwrap_or_else(|e| panic!("{file}:\n{}", e.emit_to_string(src)))
+        .unwrap_or_else(|e| panic!("{what}:\n{}", e.emit_to_string(src)))
     }
 
-    /// Every kernel, composed as the pipelines get it, parses and validates;
-    /// so does every combination of its override values, specialised as
-    /// the device would.
+    /// Every combination of stepper and enhancers a scene can ask for,
+    /// composed as its pipeline gets it, parses and validates; so does
+    /// every combination of its override values, specialised as the device
+    /// would.
     #[test]
-    fn every_kernel_and_override_combination_validates_without_a_gpu() {
-        for (file, _) in KERNELS {
-            let src = kernel(file).unwrap();
-            let module = parse(file, &src);
-            let info = validate(file, &src, &module);
-            let names = OVERRIDES.iter().find(|(k, _)| k == file).unwrap().1;
-            for (name, _) in module.overrides.iter().map(|(_, o)| (o.name.clone(), ())) {
-                let name = name.unwrap();
+    fn every_kernel_combination_validates_without_a_gpu() {
+        let keys = KernelKey::all();
+        // DVR/MImDA × refraction off/on × chains of 0–3 of 3 kinds.
+        assert_eq!(keys.len(), 2 * 2 * (1 + 3 + 9 + 27));
+        for key in &keys {
+            let what = format!("{key:?}");
+            let src = kernel(key).unwrap();
+            let module = parse(&what, &src);
+            let info = validate(&what, &src, &module);
+            for (_, o) in module.overrides.iter() {
+                let name = o.name.clone().unwrap();
                 assert!(
-                    names.contains(&name.as_str()),
-                    "{file}: override {name} is not listed"
+                    OVERRIDES.contains(&name.as_str()),
+                    "override {name} is not listed"
                 );
             }
-            for bits in 0..1u32 << names.len() {
-                let mut constants = naga::back::PipelineConstants::default();
-                for (i, n) in names.iter().enumerate() {
-                    constants.insert(n.to_string(), ((bits >> i) & 1) as f64);
+            // The override combinations of the plain and the fullest kernels.
+            if key.enhancers.len() == MAX_ENHANCERS || key.enhancers.is_empty() {
+                for bits in 0..1u32 << OVERRIDES.len() {
+                    let mut constants = naga::back::PipelineConstants::default();
+                    for (i, n) in OVERRIDES.iter().enumerate() {
+                        constants.insert(n.to_string(), ((bits >> i) & 1) as f64);
+                    }
+                    let (m, _) = naga::back::pipeline_constants::process_overrides(
+                        &module,
+                        &info,
+                        Some((naga::ShaderStage::Compute, "main")),
+                        &constants,
+                    )
+                    .unwrap_or_else(|e| panic!("{what} {constants:?}: {e}"));
+                    validate(&what, &src, &m);
                 }
-                let (m, _) = naga::back::pipeline_constants::process_overrides(
-                    &module,
-                    &info,
-                    Some((naga::ShaderStage::Compute, "main")),
-                    &constants,
-                )
-                .unwrap_or_else(|e| panic!("{file} {constants:?}: {e}"));
-                validate(file, &src, &m);
             }
         }
     }
 
-    /// Every shared module is imported by some kernel (none can rot unseen)
-    /// and parses on its own with its imports.
+    /// Every module and enhancer file is used by some combination (none can
+    /// rot unseen), and a bad import is an error.
     #[test]
-    fn every_module_is_used_and_stands_with_its_imports() {
+    fn every_module_is_used() {
+        let all: Vec<String> = KernelKey::all()
+            .iter()
+            .map(|k| kernel(k).unwrap())
+            .collect();
         for (name, text) in MODULES {
-            let used = KERNELS
-                .iter()
-                .any(|(_, k)| k.lines().any(|l| l.trim() == format!("#import {name}")));
-            assert!(used, "shaders/shared/{name}.wgsl is imported by no kernel");
-            let src = compose(name, text).unwrap();
-            // A module alone may use a kernel's override (none does today)
-            // but must parse.
-            parse(name, &src);
+            let first = text.lines().find(|l| !l.trim().is_empty()).unwrap();
+            assert!(
+                all.iter().any(|k| k.contains(first)),
+                "module {name} is in no kernel"
+            );
         }
-        assert!(compose("x", "#import nope\n").is_err());
+        for kind in EnhancerKind::ALL {
+            let key = KernelKey {
+                enhancers: vec![kind],
+                ..Default::default()
+            };
+            assert!(kernel(&key).unwrap().contains("fn enh0_sample("));
+        }
+        assert!(compose("x", "#import nope\n", &[]).is_err());
+        assert!(KernelKey {
+            enhancers: vec![EnhancerKind::PassThrough; 4],
+            ..Default::default()
+        }
+        .chain_module()
+        .is_err());
     }
 
     /// The Rust mirrors of the GPU structs against naga's layout of the WGSL:
     /// the same size, and every field at the same offset.
     #[test]
     fn rust_mirrors_match_the_wgsl_layout() {
-        use super::super::params::{GpuFrame, GpuView};
+        use super::super::params::{GpuFrame, GpuView, ToolParams};
         use crate::index::IndexNode;
         use std::mem::{offset_of, size_of};
-        let src = kernel("raycast.wgsl").unwrap();
+        let src = kernel(&KernelKey::default()).unwrap();
         let module = parse("raycast.wgsl", &src);
         let layout = |name: &str| -> (u32, Vec<(String, u32)>) {
             let ty = module
@@ -206,9 +361,10 @@ mod tests {
             GpuFrame,
             [
                 rt0, rt1, rt2, center, extent, domain, spacing, tf, render, light, counts, pool,
-                tf_offsets
+                optics, aux, tf_offsets
             ]
         );
         check!("IndexNode", IndexNode, [tree, data, range, nx, ny, nz]);
+        check!("ToolParams", ToolParams, [a, b, c, d]);
     }
 }
