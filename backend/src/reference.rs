@@ -19,6 +19,7 @@
 use glam::DVec3;
 use parallax_common::camera::{Placement, View};
 use parallax_common::tf::TransferFunction;
+use parallax_common::tools::ClipPlane;
 use parallax_common::volume::Volume;
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -96,10 +97,39 @@ pub fn integrate(
     dir: DVec3,
     tol: Tolerance,
 ) -> Rgba {
+    integrate_kept(vol, tf, origin, dir, tol, &[])
+}
+
+/// The integral along the part of the ray that lies in every kept
+/// half-space `normal·q + offset ≤ 0` (volume space): what clip planes whose
+/// context factor is 0 leave of the volume (G10 §4, viewed head-on).
+pub fn integrate_kept(
+    vol: &Volume,
+    tf: &TransferFunction,
+    origin: DVec3,
+    dir: DVec3,
+    tol: Tolerance,
+    keep: &[(DVec3, f64)],
+) -> Rgba {
     let ext = DVec3::from(vol.info.extent());
-    let Some((t0, t1)) = clip_to_box(origin, dir, ext) else {
+    let Some((mut t0, mut t1)) = clip_to_box(origin, dir, ext) else {
         return [0.0; 4];
     };
+    for &(n, p) in keep {
+        let (a, b) = (n.dot(origin) + p, n.dot(dir));
+        if b.abs() < 1e-300 {
+            if a > 0.0 {
+                return [0.0; 4];
+            }
+        } else if b > 0.0 {
+            t1 = t1.min(-a / b);
+        } else {
+            t0 = t0.max(-a / b);
+        }
+    }
+    if t1 <= t0 {
+        return [0.0; 4];
+    }
     let breaks = cell_crossings(vol, origin, dir, t0, t1);
     let kinks = tf.control_values();
     let field = |t: f64| vol.sample((origin + dir * t).into());
@@ -359,14 +389,34 @@ pub fn render(
     view: &View,
     tol: Tolerance,
 ) -> Vec<Rgba> {
+    render_clipped(vol, tf, placement, view, tol, &[])
+}
+
+/// [`render`] with the half-spaces that clip planes cut away removed (their
+/// context factor taken as 0, as when viewed head-on).
+pub fn render_clipped(
+    vol: &Volume,
+    tf: &TransferFunction,
+    placement: &Placement,
+    view: &View,
+    tol: Tolerance,
+    planes: &[ClipPlane],
+) -> Vec<Rgba> {
     let [w, h] = view.resolution;
     let ext = vol.info.extent();
+    let keep: Vec<(DVec3, f64)> = planes
+        .iter()
+        .map(|c| {
+            let v = c.in_volume(placement, ext);
+            (v.normal, v.offset)
+        })
+        .collect();
     (0..w * h)
         .into_par_iter()
         .map(|p| {
             let (o, d) = view.ray(p % w, p / w);
             let (vo, vd) = placement.ray_to_volume(ext, o, d);
-            integrate(vol, tf, vo, vd, tol)
+            integrate_kept(vol, tf, vo, vd, tol, &keep)
         })
         .collect()
 }

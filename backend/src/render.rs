@@ -24,6 +24,9 @@ struct ActiveTf {
     version: u64,
     table: TfTable,
     empty: EmptinessTable,
+    /// Emptiness for refracting kernels: a range is skipped only where
+    /// τ = 0 and ν = 1 (a transparent lens still bends rays).
+    empty_refraction: EmptinessTable,
 }
 
 pub struct Renderer {
@@ -132,10 +135,12 @@ impl Renderer {
         let bins = PreintTable::suggested_bins(lo, hi, integer);
         let table = PreintTable::new(tf, lo, hi, bins)?;
         let empty = EmptinessTable::new(tf, lo, hi, bins)?;
+        let empty_refraction = EmptinessTable::new(&tf.refraction_as_extinction(), lo, hi, bins)?;
         self.tf = Some(ActiveTf {
             version,
             table: TfTable::new(&self.gpu, &table, tf.max_importance()),
             empty,
+            empty_refraction,
         });
         // Last frame's visibility was for another transfer function.
         self.last = None;
@@ -229,7 +234,12 @@ impl Renderer {
             self.loader.wait_idle();
         }
         let t = Instant::now();
-        let empty = |lo: f32, hi: f32| tf.empty.is_empty(lo as f64, hi as f64);
+        let table = if cfg.refraction {
+            &tf.empty_refraction
+        } else {
+            &tf.empty
+        };
+        let empty = |lo: f32, hi: f32| table.is_empty(lo as f64, hi as f64);
         let feedback = self.last.as_ref().map(|(i, f)| (i, f.as_slice()));
         let cut = self.loader.update(views, placement, &empty, feedback);
         // A brick that fails its read or checksum is not fatal: the loader

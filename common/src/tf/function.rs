@@ -270,6 +270,18 @@ impl TransferFunction {
 
     /// The largest importance anywhere (importance is piecewise linear, so
     /// its maximum is at a control point).
+    /// The same function with |ν − 1| added to the extinction of every
+    /// control point: what a refracting kernel must not skip (a range is
+    /// empty under it only where τ = 0 and ν = 1 throughout, since both are
+    /// linear between control points).
+    pub fn refraction_as_extinction(&self) -> TransferFunction {
+        let mut t = self.clone();
+        for p in &mut t.points {
+            p.extinction += (p.refraction - 1.0).abs();
+        }
+        t
+    }
+
     pub fn max_importance(&self) -> f64 {
         self.points.iter().map(|p| p.importance).fold(0.0, f64::max)
     }

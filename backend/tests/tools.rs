@@ -1,0 +1,458 @@
+//! Tools, enhancers and steppers (G10 §4–5) against the exact integral and
+//! closed forms: the clip plane, MImDA, refraction, and the kernels
+//! specialised for each combination.
+
+mod support;
+
+use glam::DVec3;
+use parallax_backend::reference::{self, Tolerance};
+use parallax_backend::render::Renderer;
+use parallax_common::camera::{Placement, View};
+use parallax_common::config::{Interpolation, Mode, RenderConfig, Shading};
+use parallax_common::octree::BrickEncoding;
+use parallax_common::tf::{ControlPoint, TransferFunction};
+use parallax_common::tools::{ClipPlane, Tool};
+use parallax_common::volume::{Volume, VoxelType};
+use std::path::Path;
+use support::{assert_valid, import_volume, marschner_lobb, mean_alpha, translucent};
+
+/// Plain DVR, no shading, full-length rays, full resolution, exact
+/// interpolation: what the reference integral is compared with.
+fn exact_config() -> RenderConfig {
+    RenderConfig {
+        shading: Shading::None,
+        step_factor: 0.125,
+        early_termination: 1.0,
+        accuracy: 0.01,
+        visibility_feedback: false,
+        interpolation: Interpolation::Exact,
+        ..RenderConfig::default()
+    }
+}
+
+fn render(
+    db: &Path,
+    tf: &TransferFunction,
+    tools: &[Tool],
+    placement: &Placement,
+    view: &View,
+    cfg: &RenderConfig,
+) -> Vec<[f32; 4]> {
+    let mut r = Renderer::new(db, cfg).unwrap();
+    r.set_transfer_function(1, tf).unwrap();
+    r.set_tools(1, tools).unwrap();
+    let mut f = r.converge(placement, &[*view], cfg, 40).unwrap();
+    assert_valid("render", &f.images[0]);
+    f.images.remove(0)
+}
+
+fn centred(rotation_deg: [f64; 3]) -> Placement {
+    Placement {
+        center: [0.0, 0.0, 0.0],
+        rotation_deg,
+        size: 0.3,
+    }
+}
+
+/// The volume ML32 in full-precision bricks of 8.
+fn ml32(dir: &Path) -> (Volume, std::path::PathBuf) {
+    let vol = marschner_lobb(32);
+    let db = dir.join("ml32.pxo");
+    import_volume(&vol, &db, 8, BrickEncoding::F32);
+    (vol, db)
+}
+
+fn head_on() -> View {
+    View::window([40, 30], [0.4, 0.3], [0.01, 0.005, 0.8])
+}
+
+/// G10 §4 clip plane viewed head-on (context factor 0 on every ray) with no
+/// band: exactly the integral of the volume with the cut-away half-space
+/// removed — the plane is a segment boundary of every ray, so no segment
+/// straddles it.
+#[test]
+fn a_clip_plane_head_on_removes_exactly_its_half_space() {
+    let dir = tempfile::tempdir().unwrap();
+    let (vol, db) = ml32(dir.path());
+    let tf = translucent();
+    let placement = centred([20.0, 35.0, 0.0]);
+    let view = head_on();
+    let cfg = exact_config();
+    let planes = [
+        ClipPlane {
+            point: [0.01, 0.0, 0.02],
+            normal: [0.0, 0.0, 1.0],
+            thickness: 0.0,
+            context: [0.3, 0.7],
+        },
+        // Tilted 10°: still head-on (1 − cos 10° < f_l).
+        ClipPlane {
+            point: [0.0, -0.02, -0.01],
+            normal: [0.0, 10f64.to_radians().sin(), 10f64.to_radians().cos()],
+            thickness: 0.0,
+            context: [0.3, 0.7],
+        },
+    ];
+    let tol = Tolerance { abs: 1e-7 };
+    let plain = render(&db, &tf, &[], &placement, &view, &cfg);
+    let full = reference::render(&vol, &tf, &placement, &view, tol);
+    let (e_plain, _) = support::error(&plain, &full);
+    for plane in planes {
+        let img = render(&db, &tf, &[Tool::ClipPlane(plane)], &placement, &view, &cfg);
+        let want = reference::render_clipped(&vol, &tf, &placement, &view, tol, &[plane]);
+        let (rmse, max) = support::error(&img, &want);
+        let (cut, _) = support::error(&img, &full);
+        eprintln!(
+            "clip plane {:?}: RMSE {rmse:.2e} (max {max:.2e}) against the clipped integral; unclipped {e_plain:.2e}; the plane changes the image by {cut:.2e}",
+            plane.normal
+        );
+        // As close to the clipped integral as the plain render is to the
+        // whole one; the plane itself changes the image far more.
+        assert!(rmse <= 1.5 * e_plain + 2e-5, "{rmse} vs {e_plain}");
+        assert!(cut > 20.0 * rmse.max(1e-6), "{cut}");
+        assert!(mean_alpha(&img) < mean_alpha(&plain));
+    }
+}
+
+/// Spherically symmetric shells with a plane through the centre whose
+/// normal turns from facing the viewer to lying across the view: the
+/// context factor μ rises from 0 to 1, and the cut-away half returns with
+/// it, monotonically.
+#[test]
+fn context_returns_monotonically_as_the_view_turns_parallel() {
+    let dir = tempfile::tempdir().unwrap();
+    // Concentric shells about the exact centre of the box.
+    let n = 32;
+    let c = n as f64 / 2.0;
+    let vol = Volume::from_fn([n, n, n], [1.0; 3], VoxelType::U8, |i, j, k| {
+        let r = DVec3::new(i as f64 + 0.5 - c, j as f64 + 0.5 - c, k as f64 + 0.5 - c).length();
+        if r < 0.45 * n as f64 {
+            (128.0 + 127.0 * (std::f64::consts::PI * r / 4.0).cos()).round() as f32
+        } else {
+            0.0
+        }
+    });
+    let db = dir.path().join("shells.pxo");
+    import_volume(&vol, &db, 8, BrickEncoding::F32);
+    let tf = translucent();
+    let placement = centred([0.0; 3]);
+    // Nearly parallel rays, so that the part the plane keeps has the same
+    // optical depth in all (up to sampling) whatever the plane's angle.
+    let view = View::window([32, 32], [0.32, 0.32], [0.0, 0.0, 8.0]);
+    let cfg = RenderConfig {
+        step_factor: 0.5,
+        ..exact_config()
+    };
+    // Σ optical depth −ln(1 − α) over the image: the cut-away half counts
+    // in proportion to how much μ lets through, the kept half the same at
+    // every angle.
+    let depth = |img: &[[f32; 4]]| -> f64 {
+        img.iter()
+            .map(|p| -(1.0 - p[3] as f64).max(1e-12).ln())
+            .sum::<f64>()
+    };
+    let all = depth(&render(&db, &tf, &[], &placement, &view, &cfg));
+    let mut last = 0.0;
+    let mut alphas = Vec::new();
+    for deg in (0..=90).step_by(10) {
+        let a = (deg as f64).to_radians();
+        let plane = ClipPlane {
+            point: [0.0; 3],
+            normal: [a.sin(), 0.0, a.cos()],
+            thickness: 0.0,
+            context: [0.3, 0.7],
+        };
+        let m = depth(&render(
+            &db,
+            &tf,
+            &[Tool::ClipPlane(plane)],
+            &placement,
+            &view,
+            &cfg,
+        ));
+        alphas.push((deg, m));
+        // While μ = 0 (1 − cos a < f_l: a < 45.6°) the kept half is the
+        // same up to the pixel grid (1%); from then on it rises.
+        if deg < 50 {
+            assert!(m >= last * 0.99, "{deg}°: {m} after {last}");
+        } else {
+            assert!(m > last, "{deg}°: {m} after {last}");
+        }
+        last = m;
+    }
+    eprintln!("optical depth by angle: {alphas:?}, no plane {all}");
+    let (first, end) = (alphas[0].1, alphas.last().unwrap().1);
+    assert!(first < 0.6 * all, "head-on the front half is gone");
+    assert!(end > 0.99 * all, "parallel to the view it is all back");
+    assert!(end > 1.5 * first);
+}
+
+/// The emphasis band: behind the plane, within `thickness`, the sliced
+/// material goes to full opacity; nothing changes elsewhere.
+#[test]
+fn the_emphasis_band_makes_the_slice_opaque() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, db) = ml32(dir.path());
+    let tf = translucent();
+    let placement = centred([20.0, 35.0, 0.0]);
+    let view = head_on();
+    let cfg = exact_config();
+    let plane = |thickness| ClipPlane {
+        point: [0.0, 0.0, 0.0],
+        normal: [0.0, 0.0, 1.0],
+        thickness,
+        context: [0.3, 0.7],
+    };
+    let cut = render(
+        &db,
+        &tf,
+        &[Tool::ClipPlane(plane(0.0))],
+        &placement,
+        &view,
+        &cfg,
+    );
+    let band = render(
+        &db,
+        &tf,
+        &[Tool::ClipPlane(plane(0.01))],
+        &placement,
+        &view,
+        &cfg,
+    );
+    assert!(mean_alpha(&band) > mean_alpha(&cut) + 0.05);
+    // Where the slice holds material the band is opaque.
+    let opaque = band.iter().filter(|p| p[3] > 0.999).count();
+    assert!(opaque > band.len() / 4, "{opaque} of {}", band.len());
+}
+
+/// MImDA with γ = 0 is plain DVR, bit for bit (G10 §4: "smoothly
+/// interpolate from plain volume rendering (with γ = 0)"), with and
+/// without shading, and whatever the early-termination threshold.
+#[test]
+fn mimda_with_gamma_zero_is_dvr_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, db) = ml32(dir.path());
+    let tf = translucent();
+    let placement = centred([20.0, 35.0, 0.0]);
+    let view = head_on();
+    for (shading, early) in [(Shading::None, 1.0), (Shading::Phong, 0.95)] {
+        let dvr = RenderConfig {
+            shading,
+            early_termination: early,
+            ..exact_config()
+        };
+        let mimda = RenderConfig {
+            mode: Mode::Mimda,
+            gamma: 0.0,
+            ..dvr.clone()
+        };
+        let a = render(&db, &tf, &[], &placement, &view, &dvr);
+        let b = render(&db, &tf, &[], &placement, &view, &mimda);
+        assert!(mean_alpha(&a) > 0.1);
+        assert!(a == b, "{shading:?}: γ = 0 differs from DVR");
+    }
+}
+
+/// An outer shell of low importance (blue) around an inner ball of high
+/// importance (red): as γ grows, the inner ball shines through (G10 Fig. 6),
+/// monotonically.
+#[test]
+fn an_important_inner_shell_rises_monotonically_with_gamma() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 32;
+    let c = n as f64 / 2.0;
+    let vol = Volume::from_fn([n, n, n], [1.0; 3], VoxelType::U8, |i, j, k| {
+        let r = DVec3::new(i as f64 + 0.5 - c, j as f64 + 0.5 - c, k as f64 + 0.5 - c).length();
+        if r < 0.25 * n as f64 {
+            200.0
+        } else if (0.32 * n as f64..0.45 * n as f64).contains(&r) {
+            100.0
+        } else {
+            0.0
+        }
+    });
+    let db = dir.path().join("nested.pxo");
+    import_volume(&vol, &db, 8, BrickEncoding::F32);
+    let p = |v: f64, color: [f64; 3], tau: f64, imp: f64| {
+        ControlPoint::new(v, color, tau).with_importance(imp)
+    };
+    let blue = [0.0, 0.0, 1.0];
+    let red = [1.0, 0.0, 0.0];
+    let tf = TransferFunction::from_points(vec![
+        p(0.0, blue, 0.0, 0.1),
+        p(90.0, blue, 0.0, 0.2),
+        p(100.0, blue, 0.2, 0.2),
+        p(110.0, blue, 0.0, 0.2),
+        p(190.0, red, 0.0, 0.9),
+        p(200.0, red, 0.2, 0.9),
+    ])
+    .unwrap();
+    let placement = centred([0.0; 3]);
+    let view = View::window([32, 32], [0.32, 0.32], [0.0, 0.0, 1.2]);
+    let mut last = -1.0;
+    let mut reds = Vec::new();
+    for gamma in [0.0, 0.25, 0.5, 0.75, 1.0] {
+        let cfg = RenderConfig {
+            mode: Mode::Mimda,
+            gamma,
+            early_termination: 0.99,
+            ..exact_config()
+        };
+        let img = render(&db, &tf, &[], &placement, &view, &cfg);
+        let red: f64 = img.iter().map(|p| p[0] as f64).sum::<f64>() / img.len() as f64;
+        reds.push((gamma, red));
+        assert!(
+            red > last,
+            "γ = {gamma}: inner contribution {red} after {last}"
+        );
+        last = red;
+    }
+    eprintln!("inner (red) contribution by γ: {reds:?}");
+    assert!(reds[4].1 > 1.4 * reds[0].1);
+}
+
+/// A transparent ball of refraction index `nu` (the rest 1), radius `r`
+/// voxels, in an n³ volume.
+fn lens(dir: &Path, n: usize, r: f64, nu: f64) -> (std::path::PathBuf, TransferFunction) {
+    let c = n as f64 / 2.0;
+    let vol = Volume::from_fn([n, n, n], [1.0; 3], VoxelType::U8, |i, j, k| {
+        let d = DVec3::new(i as f64 + 0.5 - c, j as f64 + 0.5 - c, k as f64 + 0.5 - c).length();
+        (255.0 * (r - d + 0.5).clamp(0.0, 1.0)).round() as f32
+    });
+    let db = dir.join(format!("lens{nu}.pxo"));
+    import_volume(&vol, &db, 8, BrickEncoding::F32);
+    let tf = TransferFunction::from_points(vec![
+        ControlPoint::new(0.0, [0.0; 3], 0.0).with_refraction(1.0),
+        ControlPoint::new(255.0, [0.0; 3], 0.0).with_refraction(nu),
+    ])
+    .unwrap();
+    (db, tf)
+}
+
+/// Snell's law at a sphere in closed form: the direction a ray (volume
+/// space) leaves a ball of index `nu` (outside 1) centred at `c` with
+/// radius `r`.
+fn through_sphere(o: DVec3, d: DVec3, c: DVec3, r: f64, nu: f64) -> DVec3 {
+    let hit = |o: DVec3, d: DVec3, far: bool| -> Option<f64> {
+        let oc = o - c;
+        let b = oc.dot(d);
+        let disc = b * b - (oc.length_squared() - r * r);
+        (disc > 0.0).then(|| {
+            if far {
+                -b + disc.sqrt()
+            } else {
+                -b - disc.sqrt()
+            }
+        })
+    };
+    let refract = |d: DVec3, n: DVec3, eta: f64| -> DVec3 {
+        let cosi = -n.dot(d);
+        let k = 1.0 - eta * eta * (1.0 - cosi * cosi);
+        if k < 0.0 {
+            d + 2.0 * cosi * n
+        } else {
+            (eta * d + (eta * cosi - k.sqrt()) * n).normalize()
+        }
+    };
+    let Some(t1) = hit(o, d, false) else {
+        return d;
+    };
+    let p1 = o + d * t1;
+    let n1 = (p1 - c) / r;
+    let d1 = refract(d, n1, 1.0 / nu);
+    if d1.dot(n1) > 0.0 {
+        return d1; // total internal reflection: it never enters
+    }
+    let t2 = hit(p1, d1, true).unwrap();
+    let p2 = p1 + d1 * t2;
+    refract(d1, -(p2 - c) / r, nu)
+}
+
+/// Refraction (G10 §4): ν = 1 everywhere is no refraction, bit for bit; a
+/// refracting ball bends rays as Snell's law predicts; nothing is NaN at
+/// grazing incidence or under total internal reflection.
+#[test]
+fn refraction_follows_snells_law() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 48;
+    let radius = 14.0;
+    let placement = centred([0.0; 3]);
+    // Nearly parallel rays through the ball and around it.
+    let view = View::window([40, 40], [0.24, 0.24], [0.0, 0.0, 4.0]);
+    let cfg = RenderConfig {
+        step_factor: 0.25,
+        ..exact_config()
+    };
+    let refracting = RenderConfig {
+        refraction: true,
+        ..cfg.clone()
+    };
+
+    // ν = 1: the refraction kernel gives the plain image.
+    let (db1, _) = lens(dir.path(), n, radius, 1.0);
+    let tf = translucent();
+    let a = render(&db1, &tf, &[], &placement, &view, &cfg);
+    let b = render(&db1, &tf, &[], &placement, &view, &refracting);
+    assert!(mean_alpha(&a) > 0.01);
+    assert!(
+        a == b,
+        "ν = 1 with refraction on differs from no refraction"
+    );
+
+    let exit = [Tool::ExitDirection];
+    let ext = [n as f64; 3];
+    let centre = DVec3::splat(n as f64 / 2.0);
+    for nu in [1.33, 0.6] {
+        let (db, tf) = lens(dir.path(), n, radius, nu);
+        let img = render(&db, &tf, &exit, &placement, &view, &refracting);
+        let mut worst = 0f64;
+        let mut sum = 0.0;
+        let mut count = 0;
+        for j in 0..40u32 {
+            for i in 0..40u32 {
+                let px = img[(j * 40 + i) as usize];
+                assert!(px.iter().all(|v| v.is_finite()), "({i}, {j}): {px:?}");
+                if px[3] == 0.0 {
+                    continue; // misses the volume's box
+                }
+                let got = DVec3::new(px[0] as f64, px[1] as f64, px[2] as f64) * 2.0 - DVec3::ONE;
+                assert!(
+                    (got.length() - 1.0).abs() < 1e-3,
+                    "not a unit direction: {got}"
+                );
+                let (o, d) = view.ray(i, j);
+                let (vo, vd) = placement.ray_to_volume(ext, o, d);
+                // The impact parameter: only rays that cross the ball well
+                // inside its rim are compared (the rim is a voxel-wide
+                // blend, where no sharp interface exists).
+                let b = (vo - centre).cross(vd).length();
+                if b > 0.85 * radius && b < 1.15 * radius {
+                    continue;
+                }
+                // Nor those near the critical angle of total reflection,
+                // where the exit direction jumps.
+                if nu < 1.0 && (b - nu * radius).abs() < 0.1 * radius {
+                    continue;
+                }
+                let want = through_sphere(vo, vd, centre, radius, nu);
+                let err = got.angle_between(want).to_degrees();
+                worst = worst.max(err);
+                sum += err;
+                count += 1;
+            }
+        }
+        eprintln!(
+            "ν = {nu}: exit direction against Snell's law in closed form: mean {:.2}°, worst {worst:.2}° over {count} rays",
+            sum / count as f64
+        );
+        assert!(count > 500);
+        let mean = sum / count as f64;
+        // Measured on lavapipe: ν = 1.33 mean 0.37°, worst 2.1°; ν = 0.6
+        // (total reflection for b > 0.6 r) mean 1.9°, worst 14.5°. The
+        // ball's rim is a voxel-wide graded layer, not the sharp interface
+        // of the closed form, and the strong diverging case feels it most.
+        let (mean_max, worst_max) = if nu > 1.0 { (1.0, 4.0) } else { (3.0, 20.0) };
+        assert!(mean < mean_max, "mean error {mean}°");
+        assert!(worst < worst_max, "worst error {worst}°");
+    }
+}
