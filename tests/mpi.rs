@@ -495,3 +495,62 @@ fn a_stopped_back_end_is_named_within_the_watchdog_timeout() {
     let stats = stats_lines(&out);
     assert_eq!(stats.len(), 2 * 2, "frames 0 and 1 from two back ends");
 }
+
+/// Tools and MImDA in the cluster: three chained clip planes (one moved by
+/// the script, so the tool set is re-sent) and γ > 0 render identically
+/// under `mpirun -n 3` and embedded with two back ends.
+#[test]
+fn three_clip_planes_and_mimda_render_identically_in_the_cluster() {
+    let w = World::new();
+    std::fs::write(
+        w.path("tf-importance.toml"),
+        "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\nimportance = 0.1\n\
+         [[point]]\nvalue = 100\ncolor = [0.2, 0.5, 1]\nextinction = 0.05\nimportance = 0.2\n\
+         [[point]]\nvalue = 255\ncolor = [1, 0.8, 0.4]\nextinction = 0.4\nimportance = 0.9\n",
+    )
+    .unwrap();
+    let scene = w.path("scene-tools.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("scene.toml"))
+            .unwrap()
+            .replace("\"tf.toml\"", "\"tf-importance.toml\"")
+            .replace("[render]\n", "[render]\nmode = \"mimda\"\ngamma = 0.7\n")
+            + "[[tool]]\nkind = \"clip-plane\"\npoint = [0, 0, 0.12]\nnormal = [0, 0, 1]\nthickness = 0.02\n\
+               [[tool]]\nkind = \"clip-plane\"\npoint = [0.05, 0, 0]\nnormal = [1, 0, 0.3]\ncontext = [0.2, 0.9]\n\
+               [[tool]]\nkind = \"clip-plane\"\npoint = [0, -0.06, 0]\nnormal = [0, -1, 0]\n",
+    )
+    .unwrap();
+    let script = w.path("move.toml");
+    std::fs::write(
+        &script,
+        "frames = 4\n[[key]]\nframe = 0\ntool = [{ index = 0, point = [0, 0, 0.12] }]\n\
+         [[key]]\nframe = 3\ntool = [{ index = 0, point = [0, 0, 0.02] }]\n",
+    )
+    .unwrap();
+    let cluster = w.path("tools-cluster");
+    let mut args = w.render_args(&cluster, &scene);
+    args.extend(["--script", s(&script)]);
+    let o = mpirun(3, &args, &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    let embedded = w.path("tools-embedded");
+    let mut args = w.render_args(&embedded, &scene);
+    args.extend(["--script", s(&script), "--backends", "2"]);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", text(&o));
+    let plain = w.path("plain");
+    let o = run(&w.render_args(&plain, &w.path("scene.toml")));
+    assert!(o.status.success(), "{}", text(&o));
+    for id in ["p00", "p01", "p02", "p03"] {
+        for frame in [1, 3] {
+            assert_eq!(
+                npy(&cluster, frame, id),
+                npy(&embedded, frame, id),
+                "projector {id}, frame {frame}"
+            );
+        }
+        // The planes moved between frames 1 and 3, and they cut.
+        assert_ne!(npy(&cluster, 1, id), npy(&cluster, 3, id), "{id}");
+        assert_ne!(npy(&cluster, 3, id), npy(&plain, 3, id), "{id}");
+    }
+}

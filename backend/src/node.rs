@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use parallax_common::camera::View;
 use parallax_common::config::Display;
 use parallax_common::paths::file_in;
-use parallax_common::protocol::{FrameState, FrameStats, Link, ToBackend};
+use parallax_common::protocol::{FrameState, FrameStats, Link, Malformed, ToBackend};
 use std::cell::Cell;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
@@ -57,7 +57,19 @@ pub fn serve(link: &mut dyn Link, backends: usize) -> Result<()> {
     let mut setup: Option<Setup> = None;
     let mut failed: Option<anyhow::Error> = None;
     loop {
-        let msg = link.receive()?;
+        let msg = match link.receive() {
+            Ok(m) => m,
+            Err(e) if failed.is_none() && e.is::<Malformed>() => {
+                // A message this back end cannot read: say so at once (the
+                // front end takes it as this frame's reply and names the
+                // rank) and answer every later frame with the same error.
+                link.reply(&error_stats(link.rank(), &e))?;
+                setup = None;
+                failed = Some(e);
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
         if let Some(e) = &failed {
             match msg {
                 ToBackend::Quit => return Err(failed.take().unwrap()),
@@ -220,5 +232,77 @@ fn fault_injection(rank: u32, frame: u64) {
             }
         }
         _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::VecDeque;
+
+    struct Scripted {
+        inbox: VecDeque<Result<ToBackend>>,
+        replies: Vec<FrameStats>,
+    }
+
+    impl Link for Scripted {
+        fn rank(&self) -> u32 {
+            1
+        }
+        fn receive(&mut self) -> Result<ToBackend> {
+            self.inbox
+                .pop_front()
+                .unwrap_or_else(|| Err(anyhow::anyhow!("the front end has stopped")))
+        }
+        fn reply(&mut self, stats: &FrameStats) -> Result<()> {
+            self.replies.push(stats.clone());
+            Ok(())
+        }
+    }
+
+    /// A message the back end cannot read is answered at once with an error
+    /// naming it (the front end must not wait for its watchdog), and so is
+    /// every later frame, until quit.
+    #[test]
+    fn an_unreadable_message_is_answered_with_an_error() {
+        let frame = ToBackend::Frame(FrameState {
+            frame: 0,
+            placement: parallax_common::camera::Placement {
+                center: [0.0; 3],
+                rotation_deg: [0.0; 3],
+                size: 1.0,
+            },
+            observer: [0.0, 0.0, 1.0],
+            eta: 0.0,
+            render: Default::default(),
+            tf_version: 1,
+            tools_version: 1,
+        });
+        let mut link = Scripted {
+            inbox: VecDeque::from([
+                Err(Malformed("truncated".into()).into()),
+                Ok(frame),
+                Ok(ToBackend::Quit),
+            ]),
+            replies: Vec::new(),
+        };
+        let e = serve(&mut link, 1).unwrap_err();
+        assert!(e.to_string().contains("malformed"), "{e}");
+        assert_eq!(link.replies.len(), 2);
+        for r in &link.replies {
+            assert!(r
+                .error
+                .as_deref()
+                .unwrap()
+                .contains("malformed protocol message"));
+        }
+    }
+
+    /// A panic inside a frame becomes an error reply, not a dead thread.
+    #[test]
+    fn a_panic_becomes_an_error() {
+        let e = catch_panic(|| -> Result<()> { panic!("boom") }).unwrap_err();
+        assert!(e.to_string().contains("boom"), "{e}");
+        assert!(!catching_panics());
     }
 }

@@ -148,7 +148,7 @@ pub struct Scene {
     #[serde(default, with = "crate::paths::opt_bytes")]
     pub display: Option<PathBuf>,
     /// `[[tool]]` tables: the tools, each driving one enhancer (G10 §4).
-    #[serde(default, rename = "tool")]
+    #[serde(default, rename = "tool", with = "crate::tools::list")]
     pub tools: Vec<crate::tools::Tool>,
 }
 

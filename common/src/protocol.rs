@@ -141,9 +141,22 @@ pub fn encode<T: Serialize>(msg: &T) -> Result<Vec<u8>> {
     bincode::serde::encode_to_vec(msg, config()).context("cannot encode a protocol message")
 }
 
+/// A message that does not decode: the receiver answers with an error
+/// instead of waiting for more.
+#[derive(Debug)]
+pub struct Malformed(pub String);
+
+impl std::fmt::Display for Malformed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "malformed protocol message: {}", self.0)
+    }
+}
+
+impl std::error::Error for Malformed {}
+
 pub fn decode<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T> {
     let (v, _) =
-        bincode::serde::decode_from_slice(bytes, config()).context("malformed protocol message")?;
+        bincode::serde::decode_from_slice(bytes, config()).map_err(|e| Malformed(e.to_string()))?;
     Ok(v)
 }
 

@@ -24,9 +24,11 @@ use std::path::Path;
 /// chained enhancing behaviors").
 pub const MAX_ENHANCERS: usize = 3;
 
-/// One tool, as written in a scene file and as broadcast to the back ends.
+/// One tool, as written in a scene file (a table with its `kind`) and as
+/// broadcast to the back ends (bincode, which cannot read self-describing
+/// tags: the wire form names the variant by its index).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(rename_all = "kebab-case")]
 pub enum Tool {
     /// The default enhancer: changes nothing (and compiles to nothing). A
     /// scene may name it to measure what the chain itself costs.
@@ -61,6 +63,60 @@ pub struct ClipPlane {
 
 fn default_context() -> [f64; 2] {
     [0.3, 0.7]
+}
+
+/// The scene-file form of [`Tool`]: `kind = "…"` beside the parameters.
+#[derive(Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+enum ToolTable {
+    PassThrough,
+    ClipPlane(ClipPlane),
+    ExitDirection,
+}
+
+impl From<ToolTable> for Tool {
+    fn from(t: ToolTable) -> Tool {
+        match t {
+            ToolTable::PassThrough => Tool::PassThrough,
+            ToolTable::ClipPlane(c) => Tool::ClipPlane(c),
+            ToolTable::ExitDirection => Tool::ExitDirection,
+        }
+    }
+}
+
+impl From<Tool> for ToolTable {
+    fn from(t: Tool) -> ToolTable {
+        match t {
+            Tool::PassThrough => ToolTable::PassThrough,
+            Tool::ClipPlane(c) => ToolTable::ClipPlane(c),
+            Tool::ExitDirection => ToolTable::ExitDirection,
+        }
+    }
+}
+
+/// `#[serde(with = "tools::list")]`: a tool list as `[[tool]]` tables in
+/// readable formats, in [`Tool`]'s own (indexed) form on the wire.
+pub mod list {
+    use super::*;
+    use serde::{Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(tools: &[Tool], s: S) -> Result<S::Ok, S::Error> {
+        if s.is_human_readable() {
+            let t: Vec<ToolTable> = tools.iter().cloned().map(ToolTable::from).collect();
+            t.serialize(s)
+        } else {
+            tools.serialize(s)
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Tool>, D::Error> {
+        if d.is_human_readable() {
+            let t: Vec<ToolTable> = Vec::deserialize(d)?;
+            Ok(t.into_iter().map(Tool::from).collect())
+        } else {
+            Vec::<Tool>::deserialize(d)
+        }
+    }
 }
 
 /// The kinds of enhancer a kernel can be built with.
@@ -246,6 +302,7 @@ mod tests {
     fn tools_parse_and_bad_ones_name_the_field() {
         #[derive(Deserialize)]
         struct S {
+            #[serde(with = "list")]
             tool: Vec<Tool>,
         }
         let s: S = toml::from_str(
@@ -271,5 +328,34 @@ mod tests {
         }
         let four = vec![Tool::PassThrough; 4];
         assert!(check_tools(&four, Path::new("s.toml")).is_err());
+    }
+}
+
+#[cfg(test)]
+mod wire_tests {
+    use super::*;
+
+    #[test]
+    fn tools_cross_the_wire() {
+        let tools = vec![
+            Tool::ClipPlane(ClipPlane {
+                point: [0.1, 0.0, 0.0],
+                normal: [0.0, 1.0, 0.0],
+                thickness: 0.01,
+                context: [0.2, 0.8],
+            }),
+            Tool::PassThrough,
+            Tool::ExitDirection,
+        ];
+        #[derive(Debug, PartialEq, Serialize, Deserialize)]
+        struct M {
+            #[serde(with = "list")]
+            tools: Vec<Tool>,
+        }
+        let m = M { tools };
+        let b = bincode::serde::encode_to_vec(&m, bincode::config::standard()).unwrap();
+        let (back, _): (M, usize) =
+            bincode::serde::decode_from_slice(&b, bincode::config::standard()).unwrap();
+        assert_eq!(back, m);
     }
 }

@@ -116,6 +116,8 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
     let mut tf_version = 1u64;
     let mut tf_switch: Option<usize> = None;
     let mut notes = Notes::default();
+    let mut tools = scene.tools.clone();
+    let mut tools_version = 1u64;
     for frame in 0..frames {
         let mut state = FrameState {
             frame,
@@ -124,7 +126,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             eta: scene.render.eta,
             render: scene.render.clone(),
             tf_version,
-            tools_version: 1,
+            tools_version,
         };
         if let Some(sc) = &script {
             let st = sc.at(
@@ -136,6 +138,18 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             state.placement = st.placement;
             state.observer = st.observer;
             state.eta = st.eta;
+            state.render.gamma = sc.gamma(frame, scene.render.gamma);
+            // Tools are sent when they change, not every frame.
+            let now = sc.tools(frame, &scene.tools)?;
+            if now != tools {
+                tools = now;
+                tools_version += 1;
+                transport.broadcast(&ToBackend::Tools {
+                    version: tools_version,
+                    tools: tools.clone(),
+                })?;
+                state.tools_version = tools_version;
+            }
             // A transfer function is sent when it changes, not every frame.
             if let Some((i, path)) = st.tf {
                 if tf_switch != Some(i) {

@@ -15,11 +15,23 @@
 //! placement = { rotation_deg = [-90, 270, 0] }
 //! ```
 //!
+//! A key may also move the scene's tools and change their parameters (each
+//! `[[key.tool]]` names the scene's tool by its index), and set MImDA's γ:
+//!
+//! ```toml
+//! [[key]]
+//! frame = 30
+//! gamma = 0.8
+//! tool = [{ index = 0, point = [0, 0, 0.05], normal = [0.3, 0, 1], thickness = 0.004 }]
+//! ```
+//!
 //! Numbers are interpolated linearly between the keys that set them and held
-//! after the last; a transfer function switches at its key.
+//! after the last (a tool's normal is renormalised); a transfer function
+//! switches at its key.
 
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::Placement;
+use parallax_common::tools::Tool;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -47,7 +59,29 @@ struct Key {
     placement: PlacementKey,
     observer: Option<[f64; 3]>,
     eta: Option<f64>,
+    gamma: Option<f64>,
     transfer_function: Option<PathBuf>,
+    #[serde(default)]
+    tool: Vec<ToolKey>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ToolKey {
+    index: usize,
+    point: Option<[f64; 3]>,
+    normal: Option<[f64; 3]>,
+    thickness: Option<f64>,
+    context: Option<[f64; 2]>,
+}
+
+/// The keyframed pose and parameters of one tool.
+#[derive(Clone, Debug, Default)]
+struct ToolTracks {
+    point: Track<3>,
+    normal: Track<3>,
+    thickness: Track<1>,
+    context: Track<2>,
 }
 
 /// One numeric track: (frame, value) keys in frame order.
@@ -80,8 +114,12 @@ pub struct Script {
     size: Track<1>,
     observer: Track<3>,
     eta: Track<1>,
+    gamma: Track<1>,
     /// (first frame, file) of each transfer function switch.
     tfs: Vec<(u64, PathBuf)>,
+    /// Per tool index of the scene.
+    tools: Vec<ToolTracks>,
+    name: String,
 }
 
 /// What the script says for one frame.
@@ -111,7 +149,10 @@ impl Script {
             size: Track::default(),
             observer: Track::default(),
             eta: Track::default(),
+            gamma: Track::default(),
             tfs: Vec::new(),
+            tools: Vec::new(),
+            name: name.to_string(),
         };
         let mut last = None;
         for (i, k) in f.key.iter().enumerate() {
@@ -152,6 +193,40 @@ impl Script {
                 finite("eta", &[e])?;
                 s.eta.keys.push((k.frame, [e]));
             }
+            if let Some(g) = k.gamma {
+                if !(0.0..=1.0).contains(&g) {
+                    bail!("{at}: gamma must be in [0, 1] (got {g})");
+                }
+                s.gamma.keys.push((k.frame, [g]));
+            }
+            for t in &k.tool {
+                let at = format!("{at}: tool {}", t.index);
+                if s.tools.len() <= t.index {
+                    s.tools.resize(t.index + 1, ToolTracks::default());
+                }
+                let tr = &mut s.tools[t.index];
+                if let Some(p) = t.point {
+                    finite("point", &p)?;
+                    tr.point.keys.push((k.frame, p));
+                }
+                if let Some(n) = t.normal {
+                    finite("normal", &n)?;
+                    if n.iter().map(|x| x * x).sum::<f64>() < 1e-24 {
+                        bail!("{at}: normal must be non-zero");
+                    }
+                    tr.normal.keys.push((k.frame, n));
+                }
+                if let Some(th) = t.thickness {
+                    if !(th.is_finite() && th >= 0.0) {
+                        bail!("{at}: thickness must be ≥ 0 (got {th})");
+                    }
+                    tr.thickness.keys.push((k.frame, [th]));
+                }
+                if let Some(c) = t.context {
+                    finite("context", &c)?;
+                    tr.context.keys.push((k.frame, c));
+                }
+            }
             if let Some(t) = &k.transfer_function {
                 let p = if t.is_absolute() {
                     t.clone()
@@ -163,6 +238,45 @@ impl Script {
         }
         s.frames = f.frames.unwrap_or(last.unwrap() + 1);
         Ok(s)
+    }
+
+    /// MImDA's γ at `frame` (the scene's where the script sets none).
+    pub fn gamma(&self, frame: u64, scene: f64) -> f64 {
+        self.gamma.at(frame, [scene])[0]
+    }
+
+    /// The tools at `frame`: the scene's, moved and changed as the keys say.
+    pub fn tools(&self, frame: u64, scene: &[Tool]) -> Result<Vec<Tool>> {
+        if self.tools.len() > scene.len() {
+            bail!(
+                "{}: tool {}: the scene has only {} tool(s)",
+                self.name,
+                self.tools.len() - 1,
+                scene.len()
+            );
+        }
+        let mut out = scene.to_vec();
+        for (i, (t, tr)) in out.iter_mut().zip(&self.tools).enumerate() {
+            match t {
+                Tool::ClipPlane(c) => {
+                    c.point = tr.point.at(frame, c.point);
+                    c.normal = tr.normal.at(frame, c.normal);
+                    c.thickness = tr.thickness.at(frame, [c.thickness])[0];
+                    c.context = tr.context.at(frame, c.context);
+                }
+                _ => {
+                    let keyed = !(tr.point.keys.is_empty()
+                        && tr.normal.keys.is_empty()
+                        && tr.thickness.keys.is_empty()
+                        && tr.context.keys.is_empty());
+                    if keyed {
+                        bail!("{}: tool {i}: this kind of tool has no pose", self.name);
+                    }
+                }
+            }
+            t.check(&format!("{}: tool {i} at frame {frame}", self.name))?;
+        }
+        Ok(out)
     }
 
     /// The state of `frame`, with the scene's values where the script sets none.
@@ -243,9 +357,48 @@ mod tests {
             ("[[key]]\nframe = 0\nobserver = [0, 0, 0]\n", "observer"),
             ("[[key]]\nframe = 0\neta = nan\n", "eta"),
             ("[[key]]\nframe = 0\nspin = 1\n", "spin"),
+            ("[[key]]\nframe = 0\ngamma = 2\n", "gamma"),
+            (
+                "[[key]]\nframe = 0\ntool = [{ index = 0, normal = [0, 0, 0] }]\n",
+                "normal",
+            ),
         ] {
             let e = format!("{:#}", load(text).unwrap_err());
             assert!(e.contains("s.toml") && e.contains(field), "{e}");
         }
+    }
+}
+
+#[cfg(test)]
+mod tool_tests {
+    use super::*;
+    use parallax_common::tools::ClipPlane;
+
+    #[test]
+    fn tools_and_gamma_are_keyframed() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("s.toml");
+        std::fs::write(
+            &p,
+            "[[key]]\nframe = 0\ngamma = 0\ntool = [{ index = 0, point = [0, 0, 0], normal = [0, 0, 1] }]\n\
+             [[key]]\nframe = 10\ngamma = 1\ntool = [{ index = 0, point = [0, 0, 0.1], normal = [1, 0, 0], thickness = 0.01 }]\n",
+        )
+        .unwrap();
+        let s = Script::load(&p).unwrap();
+        let scene = vec![Tool::ClipPlane(ClipPlane {
+            point: [0.0; 3],
+            normal: [0.0, 0.0, 1.0],
+            thickness: 0.0,
+            context: [0.3, 0.7],
+        })];
+        let t = s.tools(5, &scene).unwrap();
+        let Tool::ClipPlane(c) = t[0] else { panic!() };
+        assert!((c.point[2] - 0.05).abs() < 1e-12);
+        assert_eq!(c.normal, [0.5, 0.0, 0.5]);
+        assert_eq!(c.thickness, 0.01); // its only key, held before it
+        assert_eq!(s.gamma(5, 0.3), 0.5);
+        assert_eq!(s.gamma(50, 0.3), 1.0);
+        // A key for a tool the scene does not have.
+        assert!(s.tools(0, &[]).unwrap_err().to_string().contains("s.toml"));
     }
 }
