@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The demo: imports the Colin27 head MRI into the out-of-core octree database,
 # then renders it on the desktop display with two transfer functions (opaque
-# skin, translucent brain tissue). Images land in out/demo/.
+# skin, translucent brain tissue), opened by a clip plane, and with MImDA;
+# then on a 16-projector light field wall, where eyes at different places see
+# different things (G10 §4). Images land in out/demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/setup.sh
@@ -20,12 +22,27 @@ $px render --scene configs/scenes/colin27-brain.toml --frames 8 --sync --out "$o
 cp "$out/skin/frame_00007/window.png" "$out/colin27-skin.png"
 cp "$out/brain/frame_00007/window.png" "$out/colin27-brain.png"
 
+# Tools and enhancers: a clip plane with an emphasis band, and MImDA.
+$px render --scene configs/scenes/colin27-clip.toml --frames 8 --sync --out "$out/clip"
+$px render --scene configs/scenes/colin27-mimda.toml --frames 8 --sync --out "$out/mimda"
+cp "$out/clip/frame_00007/window.png" "$out/colin27-clip.png"
+cp "$out/mimda/frame_00007/window.png" "$out/colin27-mimda.png"
+
 # The light field: a 16-projector wall (η = 1), and what five eyes along
 # the viewing line see on it.
 $px render --scene configs/scenes/colin27-wall.toml --frames 6 --sync --out "$out/wall16"
 $px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16/frame_00005" \
   --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-eyes.png"
 
+
+# The view-dependent clip plane on the wall: eyes on the right look straight
+# at the cut and see inside, eyes on the left look along it and the skin
+# comes back.
+$px render --scene configs/scenes/colin27-wall-clip.toml --frames 6 --sync --out "$out/wall16-clip"
+$px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16-clip/frame_00005" \
+  --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-clip-eyes.png"
+
 echo
-echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png and $out/wall16-eyes.png"
+echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png, $out/colin27-clip.png,"
+echo "         $out/colin27-mimda.png, $out/wall16-eyes.png and $out/wall16-clip-eyes.png"
 echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"

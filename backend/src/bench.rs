@@ -187,7 +187,173 @@ pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
     }
     write_csv(&o.out.join("bench.csv"), &points)?;
     plot(&o.out.join("bench.svg"), &points)?;
+    let kernels = run_kernels(o, &paths[0].1, &base, &reference)?;
+    write_kernels_csv(&o.out.join("kernels.csv"), &kernels)?;
     Ok(points)
+}
+
+/// One kernel combination's cost (G10 §5: one kernel per combination).
+#[derive(Clone, Debug)]
+pub struct KernelPoint {
+    pub name: &'static str,
+    pub frame_ms: f64,
+    pub render_ms: f64,
+    /// Against the plain DVR image of the same settings (0: identical).
+    pub diff_from_dvr: f64,
+}
+
+/// Frame time of the enhancer chain and the steppers at the sweep's base
+/// settings: no enhancer, the pass-through chain (three), one clip plane,
+/// three chained, MImDA, refraction (ν = 1: the kernel alone; ν rising
+/// with the data: rays bend). The configurations are timed round-robin, so
+/// that a change in the machine's load falls on all of them alike.
+pub fn run_kernels(
+    o: &BenchOptions,
+    db: &Path,
+    base: &RenderConfig,
+    reference: &[[f64; 4]],
+) -> Result<Vec<KernelPoint>> {
+    use parallax_common::config::Mode;
+    use parallax_common::tf::ControlPoint;
+    use parallax_common::tools::{ClipPlane, Tool};
+    let cfg = RenderConfig {
+        step_factor: 0.5,
+        accuracy: 1.0,
+        ..base.clone()
+    };
+    let plane = |x: f64| {
+        Tool::ClipPlane(ClipPlane {
+            point: [x, 0.0, 0.0],
+            normal: [0.3, 0.1, 1.0],
+            thickness: 0.004,
+            context: [0.3, 0.7],
+        })
+    };
+    let bending = TransferFunction::from_points(
+        o.tf.points()
+            .iter()
+            .map(|p| {
+                let (lo, hi) = (o.tf.points()[0].value, o.tf.points().last().unwrap().value);
+                let u = if hi > lo {
+                    (p.value - lo) / (hi - lo)
+                } else {
+                    0.0
+                };
+                ControlPoint {
+                    refraction: 1.0 + 0.1 * u,
+                    ..*p
+                }
+            })
+            .collect(),
+    )?;
+    let configs: Vec<(&'static str, Vec<Tool>, RenderConfig, &TransferFunction)> = vec![
+        ("dvr, no enhancer", vec![], cfg.clone(), o.tf),
+        (
+            "pass-through x3",
+            vec![Tool::PassThrough; 3],
+            cfg.clone(),
+            o.tf,
+        ),
+        ("clip plane x1", vec![plane(0.0)], cfg.clone(), o.tf),
+        (
+            "clip plane x3",
+            vec![plane(-0.02), plane(0.0), plane(0.02)],
+            cfg.clone(),
+            o.tf,
+        ),
+        (
+            "mimda gamma 0.5",
+            vec![],
+            RenderConfig {
+                mode: Mode::Mimda,
+                gamma: 0.5,
+                ..cfg.clone()
+            },
+            o.tf,
+        ),
+        (
+            "refraction, nu = 1",
+            vec![],
+            RenderConfig {
+                refraction: true,
+                ..cfg.clone()
+            },
+            o.tf,
+        ),
+        (
+            "refraction, nu 1..1.1",
+            vec![],
+            RenderConfig {
+                refraction: true,
+                ..cfg.clone()
+            },
+            &bending,
+        ),
+    ];
+    let mut renderers = Vec::new();
+    let mut first = Vec::new();
+    for (_, tools, c, tf) in &configs {
+        let mut r = Renderer::new(db, c)?;
+        r.set_transfer_function(1, tf)?;
+        r.set_tools(1, tools)?;
+        let f = r.converge(&o.placement, &[o.view], c, 64)?;
+        first.push(f.images.into_iter().next().unwrap());
+        renderers.push(r);
+    }
+    let rounds = o.repeats.max(5);
+    let mut frame_ms = vec![Vec::new(); configs.len()];
+    let mut render_ms = vec![Vec::new(); configs.len()];
+    for round in 0..rounds {
+        for (i, r) in renderers.iter_mut().enumerate() {
+            let t = Instant::now();
+            let f = r.frame(200 + round as u64, &o.placement, &[o.view], &configs[i].2)?;
+            frame_ms[i].push(t.elapsed().as_secs_f64() * 1e3);
+            render_ms[i].push(f.stats.render_ms);
+        }
+    }
+    let dvr: Vec<[f64; 4]> = first[0].iter().map(|p| p.map(|x| x as f64)).collect();
+    let (rmse_dvr, _, _) = image_error(&first[0], reference);
+    eprintln!("kernels (RMSE of plain DVR against the exact integral {rmse_dvr:.2e}):");
+    let mut out = Vec::new();
+    for (i, (name, ..)) in configs.iter().enumerate() {
+        let (diff, _, _) = image_error(&first[i], &dvr);
+        let p = KernelPoint {
+            name,
+            frame_ms: median(&mut frame_ms[i]),
+            render_ms: median(&mut render_ms[i]),
+            diff_from_dvr: diff,
+        };
+        eprintln!(
+            "{:>22}: {:8.1} ms/frame ({:8.1} ms in the kernel), {:.2}× plain DVR, differs from it by RMSE {:.2e}",
+            p.name,
+            p.frame_ms,
+            p.render_ms,
+            p.render_ms / out.first().map_or(p.render_ms, |q: &KernelPoint| q.render_ms),
+            p.diff_from_dvr
+        );
+        out.push(p);
+    }
+    Ok(out)
+}
+
+fn write_kernels_csv(path: &Path, points: &[KernelPoint]) -> Result<()> {
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("{}", path.display()))?,
+    );
+    writeln!(f, "kernel,frame_ms,render_ms,ratio_to_dvr,rmse_vs_dvr")?;
+    let base = points.first().map_or(1.0, |p| p.render_ms);
+    for p in points {
+        writeln!(
+            f,
+            "{},{:.3},{:.3},{:.3},{:.6e}",
+            p.name,
+            p.frame_ms,
+            p.render_ms,
+            p.render_ms / base,
+            p.diff_from_dvr
+        )?;
+    }
+    Ok(())
 }
 
 fn median(v: &mut [f64]) -> f64 {

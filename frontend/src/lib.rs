@@ -35,26 +35,19 @@ pub struct RunOptions {
     pub watchdog: Option<std::time::Duration>,
 }
 
-/// What a run produced: every back end's figures for every frame.
+/// What a run produced, a few numbers per frame (every back end's own
+/// figures go to `stats.jsonl`, not to memory: a long run stays small).
 #[derive(Debug, Default)]
 pub struct RunSummary {
-    pub frames: Vec<Vec<FrameStats>>,
     /// Per frame: wall time on the front end from broadcast to the last
     /// reply (ms), and the bytes of the broadcast FrameState message.
     pub wall_ms: Vec<f64>,
     pub state_bytes: Vec<usize>,
-}
-
-impl RunSummary {
     /// Per frame: front-end wall time not spent inside the slowest back
     /// end's frame — what coordination (broadcast, gather, swap lock) costs.
-    pub fn coordination_ms(&self) -> Vec<f64> {
-        self.frames
-            .iter()
-            .zip(&self.wall_ms)
-            .map(|(st, w)| (w - st.iter().map(|s| s.total_ms).fold(0.0, f64::max)).max(0.0))
-            .collect()
-    }
+    pub coordination_ms: Vec<f64>,
+    /// The last frame's figures from every back end.
+    pub last: Vec<FrameStats>,
 }
 
 /// The display a scene renders to.
@@ -207,7 +200,9 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         if opts.verbose {
             println!("{}", frame_line(frame, &stats, wall));
         }
-        summary.frames.push(stats);
+        let slowest = stats.iter().map(|s| s.total_ms).fold(0.0, f64::max);
+        summary.coordination_ms.push((wall - slowest).max(0.0));
+        summary.last = stats;
     }
     for f in [stats_file, frontend_file].into_iter().flatten() {
         f.into_inner()
@@ -216,7 +211,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
     if opts.verbose && !summary.wall_ms.is_empty() {
         let n = summary.wall_ms.len() as f64;
         let wall = summary.wall_ms.iter().sum::<f64>() / n;
-        let coord = summary.coordination_ms().iter().sum::<f64>() / n;
+        let coord = summary.coordination_ms.iter().sum::<f64>() / n;
         println!(
             "{} frames: {:.1} ms per frame on average, coordination {:.2} ms ({:.1}%), FrameState {} bytes",
             summary.wall_ms.len(),
