@@ -456,3 +456,31 @@ fn refraction_follows_snells_law() {
         assert!(worst < worst_max, "worst error {worst}°");
     }
 }
+
+/// Every shipped scene loads, with its transfer function, display and
+/// tools, and asks for a kernel the naga test validates.
+#[test]
+fn every_shipped_scene_loads() {
+    use parallax_backend::raycast::KernelKey;
+    use parallax_common::config::{Display, Scene};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/scenes");
+    let all = KernelKey::all();
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_none_or(|x| x != "toml") {
+            continue;
+        }
+        let s = Scene::load(&p).unwrap_or_else(|e| panic!("{e:#}"));
+        TransferFunction::load(&s.transfer_function).unwrap_or_else(|e| panic!("{e:#}"));
+        Display::load(s.display.as_ref().unwrap()).unwrap_or_else(|e| panic!("{e:#}"));
+        let key = KernelKey {
+            mimda: s.render.mode == Mode::Mimda,
+            refraction: s.render.refraction,
+            enhancers: s.tools.iter().map(Tool::enhancer).collect(),
+        };
+        assert!(all.contains(&key), "{}: {key:?}", p.display());
+        n += 1;
+    }
+    assert!(n >= 7, "{n} scenes");
+}
