@@ -134,11 +134,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     smp.importance = aux.x;
                     smp.refraction = aux.y;
                 }
+                if (NEEDS_GRADIENT) {
+                    smp.gradient = gradient(leaf, smp.pos);
+                }
                 chain_sample(&smp);
                 var shade = 1.0;
                 // A transparent segment adds nothing: no gradient needed.
                 if (SHADING && (smp.tau > 0.0 || smp.alpha_mix > 0.0)) {
-                    let g = gradient(leaf, smp.pos);
+                    var g = smp.gradient;
+                    if (!NEEDS_GRADIENT) {
+                        g = gradient(leaf, smp.pos);
+                    }
                     let gl = length(g);
                     if (gl > 1e-6) {
                         // Two-sided Phong with a headlight.

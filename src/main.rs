@@ -116,6 +116,10 @@ enum Command {
         repeats: usize,
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
+        /// Only the cost of each kernel combination (enhancers, MImDA,
+        /// refraction): DIR/kernels.csv.
+        #[arg(long)]
+        kernels_only: bool,
     },
     /// Write a HoloVizio-like light field wall: DIR/display.toml and one
     /// file per projector (defaults: the 72-projector wall of G10 §6).
@@ -325,6 +329,7 @@ fn run(cli: Cli) -> Result<()> {
             size,
             repeats,
             out,
+            kernels_only,
         } => {
             let (w, h) = size
                 .split_once('x')
@@ -346,8 +351,16 @@ fn run(cli: Cli) -> Result<()> {
                 view,
                 out: &out,
                 repeats,
+                kernels_only,
             })?;
-            println!("wrote {0}/bench.csv and {0}/bench.svg", out.display());
+            if kernels_only {
+                println!("wrote {}/kernels.csv", out.display());
+            } else {
+                println!(
+                    "wrote {0}/bench.csv, {0}/bench.svg and {0}/kernels.csv",
+                    out.display()
+                );
+            }
         }
         Command::DisplayGen {
             projectors,

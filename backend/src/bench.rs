@@ -51,8 +51,11 @@ pub struct BenchOptions<'a> {
     pub placement: Placement,
     pub view: View,
     pub out: &'a Path,
-    /// Timed frames per configuration (the median is reported).
+    /// Timed frames per configuration (the median is reported; at least 5
+    /// rounds for the kernels).
     pub repeats: usize,
+    /// Only the kernel combinations (`kernels.csv`), not the knob sweep.
+    pub kernels_only: bool,
 }
 
 /// Runs the sweep and writes `bench.csv` and `bench.svg` into `out`.
@@ -152,6 +155,9 @@ pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
             },
         ));
     }
+    if o.kernels_only {
+        sweeps.clear();
+    }
     let mut points = Vec::new();
     for (knob, value, bricks, cfg) in sweeps {
         let db = &paths.iter().find(|(n, _)| *n == bricks).unwrap().1;
@@ -185,8 +191,10 @@ pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
         );
         points.push(p);
     }
-    write_csv(&o.out.join("bench.csv"), &points)?;
-    plot(&o.out.join("bench.svg"), &points)?;
+    if !o.kernels_only {
+        write_csv(&o.out.join("bench.csv"), &points)?;
+        plot(&o.out.join("bench.svg"), &points)?;
+    }
     let kernels = run_kernels(o, &paths[0].1, &base, &reference)?;
     write_kernels_csv(&o.out.join("kernels.csv"), &kernels)?;
     Ok(points)
@@ -304,7 +312,15 @@ pub fn run_kernels(
     let mut frame_ms = vec![Vec::new(); configs.len()];
     let mut render_ms = vec![Vec::new(); configs.len()];
     for round in 0..rounds {
-        for (i, r) in renderers.iter_mut().enumerate() {
+        // Forwards, then backwards: no configuration always follows the same
+        // one.
+        let order: Vec<usize> = if round % 2 == 0 {
+            (0..configs.len()).collect()
+        } else {
+            (0..configs.len()).rev().collect()
+        };
+        for i in order {
+            let r = &mut renderers[i];
             let t = Instant::now();
             let f = r.frame(200 + round as u64, &o.placement, &[o.view], &configs[i].2)?;
             frame_ms[i].push(t.elapsed().as_secs_f64() * 1e3);

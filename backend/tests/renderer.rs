@@ -20,7 +20,7 @@ use parallax_common::volume::{Volume, VoxelType};
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use support::{assert_valid, import_volume, marschner_lobb, mean_alpha, translucent};
+use support::{assert_valid, exact_config, import_volume, marschner_lobb, mean_alpha, translucent};
 
 const COLIN27: &str = "/usr/share/mricron/templates/ch2.nii.gz";
 
@@ -42,20 +42,6 @@ fn centred(size: f64) -> Placement {
         center: [0.0, 0.0, 0.0],
         rotation_deg: [20.0, 35.0, 0.0],
         size,
-    }
-}
-
-/// Plain DVR, no shading, full-length rays, every leaf at full resolution,
-/// bricks interpolated with exact f32 weights (not by the texture unit).
-fn exact_config() -> RenderConfig {
-    RenderConfig {
-        shading: Shading::None,
-        step_factor: 0.125,
-        early_termination: 1.0,
-        accuracy: 0.01,
-        visibility_feedback: false,
-        interpolation: Interpolation::Exact,
-        ..RenderConfig::default()
     }
 }
 

@@ -8,27 +8,13 @@ use glam::DVec3;
 use parallax_backend::reference::{self, Tolerance};
 use parallax_backend::render::Renderer;
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{Interpolation, Mode, RenderConfig, Shading};
+use parallax_common::config::{Mode, RenderConfig, Shading};
 use parallax_common::octree::BrickEncoding;
 use parallax_common::tf::{ControlPoint, TransferFunction};
 use parallax_common::tools::{ClipPlane, Tool};
 use parallax_common::volume::{Volume, VoxelType};
 use std::path::Path;
-use support::{assert_valid, import_volume, marschner_lobb, mean_alpha, translucent};
-
-/// Plain DVR, no shading, full-length rays, full resolution, exact
-/// interpolation: what the reference integral is compared with.
-fn exact_config() -> RenderConfig {
-    RenderConfig {
-        shading: Shading::None,
-        step_factor: 0.125,
-        early_termination: 1.0,
-        accuracy: 0.01,
-        visibility_feedback: false,
-        interpolation: Interpolation::Exact,
-        ..RenderConfig::default()
-    }
-}
+use support::{assert_valid, exact_config, import_volume, marschner_lobb, mean_alpha, translucent};
 
 fn render(
     db: &Path,

@@ -9,7 +9,7 @@ struct Sample {
     len: f32,             // segment length d (data units)
     dir: vec3<f32>,       // ray direction, volume space, unit
     scalar: f32,          // s at the segment's end
-    gradient: vec3<f32>,  // ∇s at the midpoint (where the kernel computes it)
+    gradient: vec3<f32>,  // ∇s at the midpoint (computed when an enhancer reads it)
     tau: f32,             // pre-integrated extinction τ̄
     emission: vec3<f32>,  // pre-integrated extinction-weighted colour k̃
     importance: f32,      // pre-integrated importance ι (MImDA, refraction kernels)

@@ -149,6 +149,13 @@ impl KernelKey {
             self.mimda || self.refraction
         );
         let _ = writeln!(s, "const REFRACTION: bool = {};", self.refraction);
+        // The gradient costs six samples: computed before the enhancers only
+        // when one of them reads it (shading computes its own otherwise).
+        let gradient = self
+            .enhancers
+            .iter()
+            .any(|&k| enhancer_source(k).contains(".gradient"));
+        let _ = writeln!(s, "const NEEDS_GRADIENT: bool = {gradient};");
         for (i, &k) in self.enhancers.iter().enumerate() {
             let text = enhancer_source(k)
                 .replace("ENH_INDEX", &format!("{i}u"))
@@ -286,6 +293,23 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The path where an enhancer reads the gradient (none of today's does)
+    /// validates too.
+    #[test]
+    fn the_gradient_path_validates() {
+        let key = KernelKey {
+            enhancers: vec![EnhancerKind::ClipPlane],
+            ..Default::default()
+        };
+        let src = kernel(&key).unwrap();
+        assert!(src.contains("const NEEDS_GRADIENT: bool = false;"));
+        let src = src.replace(
+            "const NEEDS_GRADIENT: bool = false;",
+            "const NEEDS_GRADIENT: bool = true;",
+        );
+        validate("gradient", &src, &parse("gradient", &src));
     }
 
     /// Every module and enhancer file is used by some combination (none can

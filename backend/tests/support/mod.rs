@@ -3,6 +3,7 @@
 
 use parallax_backend::data::synth::{synth_value, SynthKind};
 use parallax_backend::store::{self, ImportOptions};
+use parallax_common::config::{Interpolation, RenderConfig, Shading};
 use parallax_common::octree::BrickEncoding;
 use parallax_common::tf::{ControlPoint, TransferFunction};
 use parallax_common::volume::{MemorySource, Volume, VoxelType};
@@ -68,5 +69,20 @@ pub fn assert_valid(what: &str, img: &[[f32; 4]]) {
                 .all(|v| v.is_finite() && *v >= 0.0 && *v <= 1.0 + 1e-6),
             "{what}: pixel {i} = {p:?}"
         );
+    }
+}
+
+/// Plain DVR, no shading, full-length rays, every leaf at full resolution,
+/// bricks interpolated with exact f32 weights (not by the texture unit):
+/// what the reference integral is compared with.
+pub fn exact_config() -> RenderConfig {
+    RenderConfig {
+        shading: Shading::None,
+        step_factor: 0.125,
+        early_termination: 1.0,
+        accuracy: 0.01,
+        visibility_feedback: false,
+        interpolation: Interpolation::Exact,
+        ..RenderConfig::default()
     }
 }
