@@ -207,6 +207,8 @@ enum Command {
 }
 
 fn main() {
+    ensure_runtime_dir();
+    init_logging();
     if let Err(e) = run(Cli::parse()) {
         eprintln!("error: {e:#}");
         std::process::exit(1);
@@ -495,6 +497,13 @@ fn render_mpi(opts: &parallax_frontend::RunOptions) -> Result<bool> {
     let universe = mpi::initialize().context("MPI initialisation failed")?;
     let world = universe.world();
     let (rank, size) = (world.rank(), world.size() as usize);
+    tracing::info!(
+        rank,
+        ranks = size,
+        host = %std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default().trim(),
+        "MPI started: {}",
+        if rank == 0 { "coordinator" } else { "back end" }
+    );
     if size < 2 {
         drop(universe);
         return render_embedded(opts, 1).map(|_| true);
@@ -572,6 +581,40 @@ fn render_embedded(opts: &parallax_frontend::RunOptions, backends: usize) -> Res
         (Ok(_), Some(e)) => Err(e),
         (Ok(_), None) => Ok(()),
     }
+}
+
+/// The Vulkan stack wants a per-user runtime folder and prints an error line
+/// on every start without one (a headless shell, a batch job, an MPI rank):
+/// give it one, private to this user, before any GPU work.
+fn ensure_runtime_dir() {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let usable = std::env::var_os("XDG_RUNTIME_DIR")
+        .map(PathBuf::from)
+        .is_some_and(|p| p.is_absolute() && p.is_dir());
+    if usable {
+        return;
+    }
+    let uid = std::fs::metadata("/proc/self").map_or(0, |m| m.uid());
+    let dir = std::env::temp_dir().join(format!("parallax-runtime-{uid}"));
+    if std::fs::create_dir_all(&dir).is_ok()
+        && std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700)).is_ok()
+    {
+        // Single-threaded here: nothing else reads the environment yet.
+        std::env::set_var("XDG_RUNTIME_DIR", &dir);
+    }
+}
+
+/// Diagnostics on standard error, chosen with `RUST_LOG` (default: warnings
+/// and errors only): the adapter choice, wgpu's own messages, the loader's
+/// decisions, MPI start-up. Per-frame figures go to `stats.jsonl`.
+fn init_logging() {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .try_init();
 }
 
 fn parse_type(s: &str, flag: &str) -> Result<VoxelType> {

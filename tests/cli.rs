@@ -228,3 +228,50 @@ fn render_writes_images_floats_and_stats() {
     ]);
     assert!(e.contains("bad.toml") && e.contains("center"), "{e}");
 }
+
+/// Run directly, with no per-user runtime folder in the environment (a
+/// headless shell, a batch job), a render prints no error line: the binary
+/// gives the Vulkan stack what it needs itself. `RUST_LOG=info` shows the
+/// adapter it chose.
+#[test]
+fn a_clean_run_prints_no_error_lines() {
+    let d = tempfile::tempdir().unwrap();
+    let vol = d.path().join("c.nrrd");
+    ok(&["synth", "shells", "--size", "16", "-o", s(&vol)]);
+    let db = d.path().join("c.pxo");
+    ok(&["import", s(&vol), "-o", s(&db), "--brick", "8"]);
+    write(
+        d.path().join("tf.toml"),
+        "[[point]]\nvalue = 0\ncolor = [1, 1, 1]\nextinction = 0.1\n",
+    );
+    write(
+        d.path().join("display.toml"),
+        "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.005\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
+    );
+    write(
+        d.path().join("p/w.toml"),
+        "id = \"w\"\nposition = [0, 0, 0.8]\nresolution = [16, 12]\n",
+    );
+    let scene = write(
+        d.path().join("scene.toml"),
+        "volume = \"c.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\n",
+    );
+    for log in [None, Some("info")] {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_parallax"));
+        c.args(["render", "--scene", s(&scene), "--frames", "1"])
+            .env_remove("XDG_RUNTIME_DIR")
+            .env_remove("RUST_LOG");
+        if let Some(l) = log {
+            c.env("RUST_LOG", l);
+        }
+        let o = c.output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        assert!(!err.to_lowercase().contains("error"), "{err}");
+        if log.is_some() {
+            assert!(err.contains("GPU adapter chosen"), "{err}");
+        } else {
+            assert!(err.trim().is_empty(), "{err}");
+        }
+    }
+}

@@ -33,11 +33,22 @@ impl Gpu {
             };
             (!named, kind)
         };
+        for a in &adapters {
+            let i = a.get_info();
+            tracing::debug!(name = %i.name, kind = ?i.device_type, backend = ?i.backend, "GPU adapter found");
+        }
         let adapter = adapters
             .into_iter()
             .min_by_key(rank)
             .expect("adapters is not empty");
         let info = adapter.get_info();
+        tracing::info!(
+            name = %info.name,
+            kind = ?info.device_type,
+            backend = ?info.backend,
+            driver = %info.driver,
+            "GPU adapter chosen"
+        );
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("parallax"),

@@ -246,6 +246,20 @@ impl Renderer {
         // never asks for it again and its parent stays a leaf (G08 §4 never
         // blocks on data); the frame names it.
         stats.bad_bricks = self.loader.errors();
+        for b in &stats.bad_bricks {
+            tracing::warn!("{b}: its parent stays a leaf");
+        }
+        tracing::debug!(
+            frame,
+            nodes = cut.stats.nodes,
+            uploads = cut.uploads.len(),
+            reads = cut.requests.len(),
+            culled_empty = cut.stats.culled_empty,
+            culled_frustum = cut.stats.culled_frustum,
+            culled_invisible = cut.stats.culled_invisible,
+            held_back = ?cut.stats.held_back,
+            "cut refined"
+        );
         stats.refine_ms = ms(t);
 
         let t = Instant::now();

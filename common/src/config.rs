@@ -169,8 +169,18 @@ impl Scene {
                 s.placement.size
             );
         }
-        if !r.eta.is_finite() {
-            bail!("{}: render.eta must be finite (got {})", f.display(), r.eta);
+        if !(0.0..=1.0).contains(&r.eta) {
+            bail!(
+                "{}: render.eta must be in [0, 1] (0: one perspective view, 1: full parallax; got {})",
+                f.display(),
+                r.eta
+            );
+        }
+        if r.upload_budget == 0 {
+            bail!(
+                "{}: render.upload_budget must be at least 1 brick per frame",
+                f.display()
+            );
         }
         if !(0.0..=1.0).contains(&r.gamma) {
             bail!(
@@ -479,6 +489,8 @@ mod tests {
             ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = 1\n[render]\naccuracy = 0\n", "render.accuracy"),
             ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = 1\n[render]\nstepfactor = 1\n", "stepfactor"),
             ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, nan, 0]\nsize = 1\n", "placement.center"),
+            ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = 1\n[render]\neta = 1.5\n", "render.eta"),
+            ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = 1\n[render]\nupload_budget = 0\n", "render.upload_budget"),
         ];
         for (text, field) in cases {
             let p = write(d.path(), "bad.toml", text);

@@ -190,7 +190,9 @@ impl Script {
                 s.observer.keys.push((k.frame, o));
             }
             if let Some(e) = k.eta {
-                finite("eta", &[e])?;
+                if !(0.0..=1.0).contains(&e) {
+                    bail!("{at}: eta must be in [0, 1] (got {e})");
+                }
                 s.eta.keys.push((k.frame, [e]));
             }
             if let Some(g) = k.gamma {
