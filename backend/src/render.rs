@@ -6,7 +6,8 @@ use crate::gpu::Gpu;
 use crate::index::SpatialIndex;
 use crate::loader::{Loader, LoaderConfig};
 use crate::raycast::{
-    BrickPool, Filtering, KernelKey, Raycaster, RenderSettings, SceneGeometry, TfTable, ToolParams,
+    BrickPool, Filtering, KernelKey, Raycaster, RenderInputs, RenderSettings, SceneGeometry,
+    TfTable, ToolParams,
 };
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
@@ -173,6 +174,11 @@ impl Renderer {
         self.raycaster.pipeline_count()
     }
 
+    /// Per-frame GPU buffers and bind groups the ray caster has made.
+    pub fn frame_buffer_counts(&self) -> crate::raycast::FrameBufferCounts {
+        self.raycaster.frame_buffer_counts()
+    }
+
     /// The kernel and its parameters for this frame's scene state.
     fn settings(&self, placement: &Placement, cfg: &RenderConfig) -> RenderSettings {
         let scene_extent = self.geometry(placement).extent();
@@ -277,7 +283,15 @@ impl Renderer {
         let settings = self.settings(placement, cfg);
         let t = Instant::now();
         let out = self.raycaster.render(
-            &self.gpu, &self.pool, &index, &tf.table, &scene, views, &settings,
+            &self.gpu,
+            &RenderInputs {
+                pool: &self.pool,
+                index: &index,
+                tf: &tf.table,
+                scene: &scene,
+                views,
+                settings: &settings,
+            },
         )?;
         stats.render_ms = ms(t);
 

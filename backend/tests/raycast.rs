@@ -5,7 +5,7 @@ use parallax_backend::data::synth::{synth_value, SynthKind};
 use parallax_backend::gpu::Gpu;
 use parallax_backend::index::{CutNode, SpatialIndex};
 use parallax_backend::raycast::{
-    BrickPool, Filtering, Raycaster, RenderSettings, SceneGeometry, TfTable,
+    BrickPool, Filtering, Raycaster, RenderInputs, RenderSettings, SceneGeometry, TfTable,
 };
 use parallax_backend::reference::{self, Tolerance};
 use parallax_backend::store::{self, ImportOptions};
@@ -123,7 +123,17 @@ fn measure(
         ..Default::default()
     };
     let mut out = rc
-        .render(gpu, pool, &index, &gtf, &sc, &[view], &settings)
+        .render(
+            gpu,
+            &RenderInputs {
+                pool,
+                index: &index,
+                tf: &gtf,
+                scene: &sc,
+                views: &[view],
+                settings: &settings,
+            },
+        )
         .unwrap();
     let reference = reference::render(&s.vol, f, &sc.placement, &view, Tolerance::default());
     let image = out.images.remove(0);
@@ -246,16 +256,18 @@ fn traversal_covers_every_path_exactly_once() {
         let out = rc
             .render(
                 &gpu,
-                &pool,
-                &index,
-                &gtf,
-                &sc,
-                &[view],
-                &RenderSettings {
-                    step_factor: 0.5,
-                    early_termination: 1.0,
-                    shading: false,
-                    ..Default::default()
+                &RenderInputs {
+                    pool: &pool,
+                    index: &index,
+                    tf: &gtf,
+                    scene: &sc,
+                    views: &[view],
+                    settings: &RenderSettings {
+                        step_factor: 0.5,
+                        early_termination: 1.0,
+                        shading: false,
+                        ..Default::default()
+                    },
                 },
             )
             .unwrap();

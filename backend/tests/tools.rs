@@ -470,3 +470,56 @@ fn every_shipped_scene_loads() {
     }
     assert!(n >= 7, "{n} scenes");
 }
+
+/// Per-frame GPU work in the right place: one pipeline per combination a
+/// frame uses, built once; frame buffers and the bind group made once and
+/// reused while nothing grows; a larger view grows them once; a new
+/// transfer function needs a new bind group, not new buffers.
+#[test]
+fn pipelines_buffers_and_bind_groups_are_reused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, db) = ml32(dir.path());
+    let tf = translucent();
+    let placement = centred([20.0, 35.0, 0.0]);
+    let cfg = RenderConfig {
+        accuracy: 1.0,
+        ..exact_config()
+    };
+    let mut r = Renderer::new(&db, &cfg).unwrap();
+    r.set_transfer_function(1, &tf).unwrap();
+    r.set_tools(1, &[]).unwrap();
+    let small = head_on();
+    r.converge(&placement, &[small], &cfg, 40).unwrap();
+    let settled = r.frame_buffer_counts();
+    for i in 0..3 {
+        r.frame(100 + i, &placement, &[small], &cfg).unwrap();
+    }
+    assert_eq!(r.frame_buffer_counts(), settled, "nothing made again");
+    let big = View::window([160, 120], [0.4, 0.3], [0.01, 0.005, 0.8]);
+    r.frame(200, &placement, &[big], &cfg).unwrap();
+    let grown = r.frame_buffer_counts();
+    assert!(grown.buffers > settled.buffers, "{settled:?} {grown:?}");
+    assert_eq!(grown.bind_groups, settled.bind_groups + 1);
+    r.frame(201, &placement, &[small], &cfg).unwrap();
+    assert_eq!(r.frame_buffer_counts(), grown, "a smaller frame fits");
+    r.set_transfer_function(2, &tf).unwrap();
+    r.frame(202, &placement, &[small], &cfg).unwrap();
+    let c = r.frame_buffer_counts();
+    assert_eq!(
+        (c.buffers, c.bind_groups),
+        (grown.buffers, grown.bind_groups + 1)
+    );
+    // Tools switch kernels: one pipeline per combination, built once.
+    assert_eq!(r.pipeline_count(), 1);
+    let plane = Tool::ClipPlane(ClipPlane {
+        point: [0.0; 3],
+        normal: [0.0, 0.0, 1.0],
+        thickness: 0.0,
+        context: [0.3, 0.7],
+    });
+    for (v, tools) in [(2, vec![plane.clone()]), (3, vec![]), (4, vec![plane])] {
+        r.set_tools(v, &tools).unwrap();
+        r.frame(300 + v, &placement, &[small], &cfg).unwrap();
+    }
+    assert_eq!(r.pipeline_count(), 2);
+}

@@ -40,6 +40,14 @@ pub struct TfTable {
     aux_prefix: u32,
     /// ι_max of the transfer function (MImDA's termination estimate).
     max_importance: f32,
+    /// Which table this is (a bind group names one table).
+    id: u64,
+}
+
+/// A process-wide serial number for GPU resources a bind group refers to.
+pub(crate) fn next_resource_id() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 /// Largest F_total / (smallest non-zero bin) for which the running integral
@@ -92,6 +100,7 @@ impl TfTable {
             aux_base,
             aux_prefix,
             max_importance: max_importance as f32,
+            id: next_resource_id(),
         }
     }
 
@@ -220,6 +229,129 @@ pub struct Raycaster {
     pipelines: HashMap<(KernelKey, bool), wgpu::ComputePipeline>,
     /// A small uniform buffer for the enhancers' parameters.
     tools: wgpu::Buffer,
+    /// The per-frame buffers, kept across frames and grown by capacity.
+    frame: FrameBuffers,
+}
+
+/// What one frame renders.
+pub struct RenderInputs<'a> {
+    pub pool: &'a BrickPool,
+    pub index: &'a SpatialIndex,
+    pub tf: &'a TfTable,
+    pub scene: &'a SceneGeometry,
+    pub views: &'a [View],
+    pub settings: &'a RenderSettings,
+}
+
+/// A buffer reused from frame to frame, replaced by a larger one (by powers
+/// of two) only when a frame needs more.
+struct Grown {
+    buffer: wgpu::Buffer,
+    capacity: u64,
+}
+
+impl Grown {
+    fn new(gpu: &Gpu, label: &'static str, usage: wgpu::BufferUsages, size: u64) -> Self {
+        let capacity = size.max(256).next_power_of_two();
+        Grown {
+            buffer: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: capacity,
+                usage,
+                mapped_at_creation: false,
+            }),
+            capacity,
+        }
+    }
+
+    /// Makes room for `size` bytes; true if the buffer was replaced.
+    fn fit(
+        &mut self,
+        gpu: &Gpu,
+        label: &'static str,
+        usage: wgpu::BufferUsages,
+        size: u64,
+    ) -> bool {
+        if size <= self.capacity {
+            return false;
+        }
+        *self = Grown::new(gpu, label, usage, size);
+        true
+    }
+}
+
+/// Frame, views, index, feedback, image and readback buffers, and the bind
+/// group over them, rebuilt only when a buffer grows or the transfer
+/// function's table or the brick pool is another one.
+struct FrameBuffers {
+    uniform: wgpu::Buffer,
+    views: Grown,
+    index: Grown,
+    feedback: Grown,
+    image: Grown,
+    readback: Grown,
+    /// The bind group and the (table, pool) it was made for.
+    bind: Option<(wgpu::BindGroup, u64, u64)>,
+    /// Buffers made and bind groups made so far (reuse is checked by tests).
+    made: FrameBufferCounts,
+}
+
+/// How often the per-frame GPU objects were made.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameBufferCounts {
+    pub buffers: u64,
+    pub bind_groups: u64,
+}
+
+const STORAGE_IN: wgpu::BufferUsages =
+    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_DST);
+const FEEDBACK: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
+    .union(wgpu::BufferUsages::COPY_SRC)
+    .union(wgpu::BufferUsages::COPY_DST);
+const IMAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC);
+const READBACK: wgpu::BufferUsages =
+    wgpu::BufferUsages::MAP_READ.union(wgpu::BufferUsages::COPY_DST);
+
+impl FrameBuffers {
+    fn new(gpu: &Gpu) -> Self {
+        FrameBuffers {
+            uniform: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("frame"),
+                size: std::mem::size_of::<GpuFrame>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            views: Grown::new(gpu, "views", STORAGE_IN, 0),
+            index: Grown::new(gpu, "spatial index", STORAGE_IN, 0),
+            feedback: Grown::new(gpu, "visibility feedback", FEEDBACK, 0),
+            image: Grown::new(gpu, "image", IMAGE, 0),
+            readback: Grown::new(gpu, "readback", READBACK, 0),
+            bind: None,
+            made: FrameBufferCounts {
+                buffers: 6,
+                bind_groups: 0,
+            },
+        }
+    }
+
+    /// Grows what this frame needs; drops the bind group if anything it
+    /// names changed.
+    fn fit(&mut self, gpu: &Gpu, views: u64, index: u64, image: u64) {
+        let grown = [
+            self.views.fit(gpu, "views", STORAGE_IN, views),
+            self.index.fit(gpu, "spatial index", STORAGE_IN, index),
+            self.feedback
+                .fit(gpu, "visibility feedback", FEEDBACK, index / 6),
+            self.image.fit(gpu, "image", IMAGE, image),
+        ];
+        let readback = self
+            .readback
+            .fit(gpu, "readback", READBACK, image + index / 6);
+        self.made.buffers += grown.iter().filter(|&&g| g).count() as u64 + readback as u64;
+        if grown.contains(&true) {
+            self.bind = None;
+        }
+    }
 }
 
 /// How bricks are interpolated.
@@ -341,6 +473,7 @@ impl Raycaster {
             hw_filter,
             pipelines: HashMap::new(),
             tools,
+            frame: FrameBuffers::new(gpu),
         })
     }
 
@@ -395,18 +528,21 @@ impl Raycaster {
         self.pipelines.len()
     }
 
-    /// Renders all `views` of a frame.
-    #[allow(clippy::too_many_arguments)]
-    pub fn render(
-        &mut self,
-        gpu: &Gpu,
-        pool: &BrickPool,
-        index: &SpatialIndex,
-        tf: &TfTable,
-        scene: &SceneGeometry,
-        views: &[View],
-        settings: &RenderSettings,
-    ) -> Result<Rendered> {
+    /// Per-frame buffers and bind groups made so far.
+    pub fn frame_buffer_counts(&self) -> FrameBufferCounts {
+        self.frame.made
+    }
+
+    /// Renders all views of a frame.
+    pub fn render(&mut self, gpu: &Gpu, inputs: &RenderInputs) -> Result<Rendered> {
+        let RenderInputs {
+            pool,
+            index,
+            tf,
+            scene,
+            views,
+            settings,
+        } = *inputs;
         let start = std::time::Instant::now();
         if index.is_empty() {
             bail!("render: empty spatial index");
@@ -449,99 +585,70 @@ impl Raycaster {
         }
         let frame = self.frame_uniform(pool, tf, scene, settings);
         let dev = &gpu.device;
-        let init = |label, contents: &[u8], usage| {
-            dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage,
-            })
-        };
-        let frame_buf = init(
-            "frame",
-            bytemuck::bytes_of(&frame),
-            wgpu::BufferUsages::UNIFORM,
-        );
-        let view_buf = init(
-            "views",
-            bytemuck::cast_slice(&gviews),
-            wgpu::BufferUsages::STORAGE,
-        );
-        let index_buf = init(
-            "spatial index",
-            bytemuck::cast_slice(&index.nodes),
-            wgpu::BufferUsages::STORAGE,
-        );
         let fb_size = index.len() as u64 * 4;
-        let feedback_buf = dev.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("visibility feedback"),
-            size: fb_size,
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_SRC
-                | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
         let img_size = pixels * 16;
         if img_size > dev.limits().max_storage_buffer_binding_size {
             bail!("render: {pixels} pixels in one frame exceed the GPU's storage binding limit");
         }
-        let image_buf = dev.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("image"),
-            size: img_size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let readback = dev.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size: img_size + fb_size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("raycast"),
-            layout: &self.bind_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: frame_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: view_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: index_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&pool.view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: pool.ranges.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: tf.buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: feedback_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: image_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 8,
-                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 9,
-                    resource: self.tools.as_entire_binding(),
-                },
-            ],
-        });
+        let views_bytes = (gviews.len() * std::mem::size_of::<GpuView>()) as u64;
+        self.frame.fit(gpu, views_bytes, fb_size * 6, img_size);
+        let fr = &self.frame;
+        gpu.queue
+            .write_buffer(&fr.uniform, 0, bytemuck::bytes_of(&frame));
+        gpu.queue
+            .write_buffer(&fr.views.buffer, 0, bytemuck::cast_slice(&gviews));
+        gpu.queue
+            .write_buffer(&fr.index.buffer, 0, bytemuck::cast_slice(&index.nodes));
+        if !matches!(&fr.bind, Some((_, t, p)) if *t == tf.id && *p == pool.id) {
+            let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("raycast"),
+                layout: &self.bind_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: fr.uniform.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: fr.views.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: fr.index.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: wgpu::BindingResource::TextureView(&pool.view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: pool.ranges.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: tf.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 6,
+                        resource: fr.feedback.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 7,
+                        resource: fr.image.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 8,
+                        resource: wgpu::BindingResource::Sampler(&self.sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 9,
+                        resource: self.tools.as_entire_binding(),
+                    },
+                ],
+            });
+            self.frame.bind = Some((bind, tf.id, pool.id));
+            self.frame.made.bind_groups += 1;
+        }
         gpu.queue
             .write_buffer(&self.tools, 0, bytemuck::cast_slice(&settings.tools));
         let max_w = views.iter().map(|v| v.resolution[0]).max().unwrap_or(0);
@@ -549,19 +656,28 @@ impl Raycaster {
         let pipeline = self
             .pipeline(gpu, &settings.kernel, settings.shading)?
             .clone();
+        let fr = &self.frame;
+        let bind = &fr.bind.as_ref().expect("made above").0;
         let mut enc = dev.create_command_encoder(&Default::default());
         // One zeroing per frame for all views (G10 §5).
-        enc.clear_buffer(&feedback_buf, 0, None);
+        enc.clear_buffer(&fr.feedback.buffer, 0, Some(fb_size));
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
+            pass.set_bind_group(0, bind, &[]);
             pass.dispatch_workgroups(max_w.div_ceil(8), max_h.div_ceil(8), views.len() as u32);
         }
-        enc.copy_buffer_to_buffer(&image_buf, 0, &readback, 0, img_size);
-        enc.copy_buffer_to_buffer(&feedback_buf, 0, &readback, img_size, fb_size);
+        enc.copy_buffer_to_buffer(&fr.image.buffer, 0, &fr.readback.buffer, 0, img_size);
+        enc.copy_buffer_to_buffer(
+            &fr.feedback.buffer,
+            0,
+            &fr.readback.buffer,
+            img_size,
+            fb_size,
+        );
         gpu.queue.submit([enc.finish()]);
-        let slice = readback.slice(..);
+        let readback = &fr.readback.buffer;
+        let slice = readback.slice(..img_size + fb_size);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
@@ -577,7 +693,9 @@ impl Raycaster {
                 let (off, n) = (v.size[2] as usize, (v.size[0] * v.size[1]) as usize);
                 *img = px[off..off + n].to_vec();
             }
-            let feedback = bytemuck::cast_slice(&data[img_size as usize..]).to_vec();
+            let feedback =
+                bytemuck::cast_slice(&data[img_size as usize..(img_size + fb_size) as usize])
+                    .to_vec();
             drop(data);
             readback.unmap();
             Ok(Rendered {

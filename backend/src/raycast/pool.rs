@@ -17,6 +17,8 @@ pub struct BrickPool {
     /// Full precision (`r32float`) or 8 bit (`r8unorm`).
     pub float: bool,
     uploaded: u64,
+    /// Which pool this is (a bind group names one pool).
+    pub(crate) id: u64,
 }
 
 impl BrickPool {
@@ -81,6 +83,7 @@ impl BrickPool {
             side,
             float,
             uploaded: 0,
+            id: super::next_resource_id(),
         })
     }
 
