@@ -76,13 +76,15 @@ enum Command {
         /// Display file (default: the scene's `display`).
         #[arg(long)]
         display: Option<PathBuf>,
-        /// Frames to render (default: the script's length, or 1).
+        /// Frames to render (default: the script's length, or until the cut
+        /// has converged).
         #[arg(long, default_value_t = 0)]
         frames: u64,
         /// Interaction script (keyframes of placement, observer, η, transfer function).
         #[arg(long)]
         script: Option<PathBuf>,
         /// Output folder: DIR/frame_NNNNN/<projector>.png, DIR/stats.jsonl
+        /// (default: out/<scene name>).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Also write float32 .npy images (linear, premultiplied).
@@ -92,9 +94,10 @@ enum Command {
         /// frames; otherwise the loader never blocks).
         #[arg(long)]
         sync: bool,
-        /// Back-end threads in the embedded (single-process) mode.
-        #[arg(long, default_value_t = 1)]
-        backends: usize,
+        /// Back-end threads in the embedded (single-process) mode (default:
+        /// the highest rank the display's projector files name, or 1).
+        #[arg(long)]
+        backends: Option<usize>,
         /// Seconds to wait for a back end's frame before naming it and
         /// ending the run (0: wait forever).
         #[arg(long, default_value_t = parallax_common::protocol::DEFAULT_WATCHDOG.as_secs_f64())]
@@ -135,9 +138,11 @@ enum Command {
         /// Pixel size s0 on the screen (m).
         #[arg(long, default_value_t = 0.0015)]
         pixel_size: f64,
-        /// Angular accuracy Φ (degrees).
-        #[arg(long, default_value_t = 0.8)]
-        angular_accuracy: f64,
+        /// Angular accuracy Φ (degrees). Default: the projectors' spacing
+        /// (field of view / projectors), at least G10's 0.8°, so that
+        /// neighbouring projectors leave no dark gaps between them.
+        #[arg(long)]
+        angular_accuracy: Option<f64>,
         /// Horizontal field of view (degrees).
         #[arg(long, default_value_t = 50.0)]
         fov: f64,
@@ -304,6 +309,10 @@ fn run(cli: Cli) -> Result<()> {
             if !(watchdog.is_finite() && watchdog >= 0.0) {
                 bail!("--watchdog {watchdog}: expected seconds ≥ 0 (0: wait forever)");
             }
+            let out = Some(out.unwrap_or_else(|| {
+                let stem = scene.file_stem().unwrap_or_default();
+                PathBuf::from("out").join(stem)
+            }));
             let opts = parallax_frontend::RunOptions {
                 scene,
                 display,
@@ -318,6 +327,10 @@ fn run(cli: Cli) -> Result<()> {
             let coordinator = if parallax_frontend::cluster::launched_by_mpi() {
                 render_mpi(&opts)?
             } else {
+                let backends = match backends {
+                    Some(n) => n,
+                    None => display_ranks(&opts)?,
+                };
                 render_embedded(&opts, backends)?;
                 true
             };
@@ -381,7 +394,8 @@ fn run(cli: Cli) -> Result<()> {
                 resolution: parse_pair::<u32>(&resolution, "--resolution")?,
                 screen: parse_pair::<f64>(&screen, "--screen")?,
                 pixel_size,
-                angular_accuracy_deg: angular_accuracy,
+                angular_accuracy_deg: angular_accuracy
+                    .unwrap_or_else(|| (fov / projectors.max(1) as f64).max(0.8)),
                 fov_deg: fov,
                 distance,
                 observer: parse_triple::<f64>(&observer, "--observer")?,
@@ -539,6 +553,19 @@ fn render_mpi(opts: &parallax_frontend::RunOptions) -> Result<bool> {
         }
         Ok(false)
     }
+}
+
+/// The back ends a display asks for: the highest rank its projector files
+/// name, or 1 when none names one.
+fn display_ranks(opts: &parallax_frontend::RunOptions) -> Result<usize> {
+    let scene = parallax_common::config::Scene::load(&opts.scene)?;
+    let display = parallax_frontend::load_display(&scene, opts.display.as_ref())?;
+    Ok(display
+        .projectors
+        .iter()
+        .filter_map(|p| p.rank)
+        .max()
+        .map_or(1, |r| r as usize))
 }
 
 /// The embedded mode: the front end on this thread, the back ends on

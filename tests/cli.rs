@@ -258,7 +258,8 @@ fn a_clean_run_prints_no_error_lines() {
     );
     for log in [None, Some("info")] {
         let mut c = Command::new(env!("CARGO_BIN_EXE_parallax"));
-        c.args(["render", "--scene", s(&scene), "--frames", "1"])
+        c.args(["render", "--scene", s(&scene)])
+            .current_dir(d.path())
             .env_remove("XDG_RUNTIME_DIR")
             .env_remove("RUST_LOG");
         if let Some(l) = log {
@@ -273,5 +274,77 @@ fn a_clean_run_prints_no_error_lines() {
         } else {
             assert!(err.trim().is_empty(), "{err}");
         }
+        // Without --frames it renders until the cut has converged; without
+        // --out it writes to out/<scene name> and says where.
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(text.contains("converged"), "{text}");
+        assert!(text.contains("out/scene"), "{text}");
+        let stats = std::fs::read_to_string(d.path().join("out/scene/stats.jsonl")).unwrap();
+        let last: serde_json::Value = serde_json::from_str(stats.lines().last().unwrap()).unwrap();
+        assert_eq!(last["adequate"], true);
+        assert!(stats.lines().count() > 1);
     }
+}
+
+/// A wall whose projector files name back-end ranks renders embedded with
+/// that many back ends, no flag needed; `display-gen` sets Φ to the
+/// projectors' spacing.
+#[test]
+fn embedded_back_ends_follow_the_display() {
+    let d = tempfile::tempdir().unwrap();
+    let vol = d.path().join("c.nrrd");
+    ok(&["synth", "shells", "--size", "16", "-o", s(&vol)]);
+    ok(&[
+        "import",
+        s(&vol),
+        "-o",
+        s(&d.path().join("c.pxo")),
+        "--brick",
+        "8",
+    ]);
+    let wall = d.path().join("wall");
+    ok(&[
+        "display-gen",
+        "--projectors",
+        "4",
+        "--resolution",
+        "16x9",
+        "-o",
+        s(&wall),
+    ]);
+    let disp = std::fs::read_to_string(wall.join("display.toml")).unwrap();
+    assert!(disp.contains("angular_accuracy_deg = 12.5"), "{disp}");
+    for (i, r) in [1, 1, 2, 3].iter().enumerate() {
+        let p = wall.join(format!("projectors/p{i:02}.toml"));
+        let text = std::fs::read_to_string(&p).unwrap();
+        std::fs::write(&p, format!("{text}rank = {r}\n")).unwrap();
+    }
+    write(
+        d.path().join("tf.toml"),
+        "[[point]]\nvalue = 0\ncolor = [1, 1, 1]\nextinction = 0.1\n",
+    );
+    let scene = write(
+        d.path().join("scene.toml"),
+        "volume = \"c.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"wall/display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.3\n[render]\neta = 1\n",
+    );
+    let out = d.path().join("out");
+    ok(&[
+        "render",
+        "--scene",
+        s(&scene),
+        "--frames",
+        "2",
+        "--out",
+        s(&out),
+    ]);
+    let stats = std::fs::read_to_string(out.join("stats.jsonl")).unwrap();
+    let ranks: std::collections::BTreeSet<u64> = stats
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["rank"]
+                .as_u64()
+                .unwrap()
+        })
+        .collect();
+    assert_eq!(ranks.into_iter().collect::<Vec<_>>(), vec![1, 2, 3]);
 }

@@ -20,7 +20,8 @@ pub struct RunOptions {
     pub scene: PathBuf,
     /// Overrides the scene's display.
     pub display: Option<PathBuf>,
-    /// Frames to render (0: the script's length, or 1 without a script).
+    /// Frames to render (0: the script's length, or without a script until
+    /// the cut has converged, at most [`CONVERGE_FRAMES`]).
     pub frames: u64,
     pub out: Option<PathBuf>,
     pub float: bool,
@@ -34,6 +35,9 @@ pub struct RunOptions {
     /// the run (`None`: forever).
     pub watchdog: Option<std::time::Duration>,
 }
+
+/// Frames rendered at most when none are asked for and no script sets them.
+pub const CONVERGE_FRAMES: u64 = 256;
 
 /// What a run produced, a few numbers per frame (every back end's own
 /// figures go to `stats.jsonl`, not to memory: a long run stays small).
@@ -100,9 +104,10 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         tools: scene.tools.clone(),
     })?;
     let script = opts.script.as_deref().map(Script::load).transpose()?;
+    let until_converged = opts.frames == 0 && script.is_none();
     let frames = match (opts.frames, &script) {
         (0, Some(s)) => s.frames,
-        (0, None) => 1,
+        (0, None) => CONVERGE_FRAMES,
         (n, _) => n,
     };
     let mut summary = RunSummary::default();
@@ -202,7 +207,14 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         }
         let slowest = stats.iter().map(|s| s.total_ms).fold(0.0, f64::max);
         summary.coordination_ms.push((wall - slowest).max(0.0));
+        let converged = stats.iter().all(|s| s.adequate && s.uploaded == 0);
         summary.last = stats;
+        if until_converged && converged {
+            break;
+        }
+        if until_converged && frame + 1 == frames {
+            eprintln!("note: the cut had not converged after {frames} frames");
+        }
     }
     for f in [stats_file, frontend_file].into_iter().flatten() {
         f.into_inner()
