@@ -55,7 +55,7 @@ enum Command {
         /// Raw input: X,Y,Z
         #[arg(long)]
         dims: Option<String>,
-        /// Raw input: u8 | u16 | i16 | f32
+        /// Raw input: u8 | i8 | u16 | i16 | u32 | i32 | f32 | f64
         #[arg(long = "type")]
         voxel_type: Option<String>,
         /// Raw input: sx,sy,sz (default 1,1,1)
@@ -279,6 +279,9 @@ fn run(cli: Cli) -> Result<()> {
             };
             let name = input.display().to_string();
             let r = store::import(src.as_mut(), &output, &name, &opts)?;
+            if let Some(note) = src.conversion_note() {
+                eprintln!("note: {note}");
+            }
             println!(
                 "imported {} → {}: {} nodes ({} stored, {} empty), {:.1} MB → {:.1} MB in {:.2} s ({:.0} MB/s of source)",
                 name,
@@ -645,7 +648,8 @@ fn init_logging() {
 }
 
 fn parse_type(s: &str, flag: &str) -> Result<VoxelType> {
-    VoxelType::parse(s).with_context(|| format!("{flag} '{s}': expected u8, u16, i16 or f32"))
+    VoxelType::parse(s)
+        .with_context(|| format!("{flag} '{s}': expected u8, i8, u16, i16, u32, i32, f32 or f64"))
 }
 
 fn parse_pair<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 2]> {

@@ -348,3 +348,25 @@ fn embedded_back_ends_follow_the_display() {
         .collect();
     assert_eq!(ranks.into_iter().collect::<Vec<_>>(), vec![1, 2, 3]);
 }
+
+/// numpy's default float64, written as NRRD, imports (rounded to 32-bit
+/// floats, and the import says how many values changed).
+#[test]
+fn a_float64_volume_imports_and_says_what_rounding_changed() {
+    let d = tempfile::tempdir().unwrap();
+    let p = d.path().join("f64.nrrd");
+    let mut bytes = b"NRRD0004\ntype: double\ndimension: 3\nsizes: 4 4 4\nencoding: raw\nendian: little\nspacings: 1 1 1\n\n".to_vec();
+    for i in 0..64 {
+        bytes.extend((i as f64 / 3.0).to_le_bytes());
+    }
+    std::fs::write(&p, bytes).unwrap();
+    let o = parallax(&["import", s(&p), "-o", s(&d.path().join("f64.pxo"))]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("f64.nrrd") && err.contains("f64 values were rounded"),
+        "{err}"
+    );
+    let info = ok(&["info", s(&d.path().join("f64.pxo")), "--verify"]);
+    assert!(info.contains("f64"), "{info}");
+}

@@ -132,7 +132,7 @@ impl Renderer {
     pub fn set_transfer_function(&mut self, version: u64, tf: &TransferFunction) -> Result<()> {
         let s = &self.db.summary;
         let (lo, hi) = (s.value_min as f64, s.value_max as f64);
-        let integer = self.db.header.info.voxel_type != parallax_common::volume::VoxelType::F32;
+        let integer = !self.db.header.info.voxel_type.is_float();
         let bins = PreintTable::suggested_bins(lo, hi, integer);
         let table = PreintTable::new(tf, lo, hi, bins)?;
         let empty = EmptinessTable::new(tf, lo, hi, bins)?;

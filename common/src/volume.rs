@@ -10,21 +10,29 @@
 use serde::{Deserialize, Serialize};
 
 /// The sample type of a source volume. Values are always handed on as `f32`
-/// data values (exact for every integer type listed here).
+/// data values: exact for 8- and 16-bit integers; 32-bit integers beyond
+/// ±2²⁴ and doubles are rounded to the nearest `f32`, and the reader says how
+/// many voxels that changed (new variants go last: the `.pxo` header records
+/// the type by its index).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum VoxelType {
     U8,
     U16,
     I16,
     F32,
+    I8,
+    I32,
+    U32,
+    F64,
 }
 
 impl VoxelType {
     pub fn bytes(self) -> usize {
         match self {
-            VoxelType::U8 => 1,
+            VoxelType::U8 | VoxelType::I8 => 1,
             VoxelType::U16 | VoxelType::I16 => 2,
-            VoxelType::F32 => 4,
+            VoxelType::F32 | VoxelType::I32 | VoxelType::U32 => 4,
+            VoxelType::F64 => 8,
         }
     }
 
@@ -34,6 +42,10 @@ impl VoxelType {
             VoxelType::U16 => "u16",
             VoxelType::I16 => "i16",
             VoxelType::F32 => "f32",
+            VoxelType::I8 => "i8",
+            VoxelType::I32 => "i32",
+            VoxelType::U32 => "u32",
+            VoxelType::F64 => "f64",
         }
     }
 
@@ -43,6 +55,10 @@ impl VoxelType {
             "u16" | "uint16" => VoxelType::U16,
             "i16" | "int16" => VoxelType::I16,
             "f32" | "float32" | "float" => VoxelType::F32,
+            "i8" | "int8" => VoxelType::I8,
+            "i32" | "int32" => VoxelType::I32,
+            "u32" | "uint32" => VoxelType::U32,
+            "f64" | "float64" | "double" => VoxelType::F64,
             _ => return None,
         })
     }
@@ -53,8 +69,21 @@ impl VoxelType {
             VoxelType::U8 => (0.0, 255.0),
             VoxelType::U16 => (0.0, 65535.0),
             VoxelType::I16 => (-32768.0, 32767.0),
-            VoxelType::F32 => (f32::MIN as f64, f32::MAX as f64),
+            VoxelType::F32 | VoxelType::F64 => (f32::MIN as f64, f32::MAX as f64),
+            VoxelType::I8 => (-128.0, 127.0),
+            VoxelType::I32 => (i32::MIN as f64, i32::MAX as f64),
+            VoxelType::U32 => (0.0, u32::MAX as f64),
         }
+    }
+
+    /// Floating-point samples (may hold NaN or ±Inf; not integer data).
+    pub fn is_float(self) -> bool {
+        matches!(self, VoxelType::F32 | VoxelType::F64)
+    }
+
+    /// Samples that `f32` cannot always hold exactly.
+    pub fn may_round(self) -> bool {
+        matches!(self, VoxelType::I32 | VoxelType::U32 | VoxelType::F64)
     }
 }
 
@@ -103,6 +132,11 @@ pub trait VolumeSource {
     /// Fills `out` (whose length is a whole number of slices, `nx·ny` values
     /// each, x fastest) with the next slices, as data values.
     fn read_slices(&mut self, out: &mut [f32]) -> anyhow::Result<()>;
+    /// After reading: what converting the samples to `f32` data values
+    /// changed, if anything (32-bit integers beyond ±2²⁴, doubles).
+    fn conversion_note(&self) -> Option<String> {
+        None
+    }
 }
 
 /// A whole volume in memory: the reference integrator's input and the small

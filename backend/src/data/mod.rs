@@ -59,7 +59,7 @@ pub fn open(path: &Path, raw: Option<RawParams>) -> Result<Box<dyn VolumeSource 
     } else if name.ends_with(".raw") || name.ends_with(".raw.gz") {
         bail!(
             "{}: a raw volume has no header; give its dims, type and spacing \
-             (--dims X,Y,Z --type u8|u16|i16|f32 --spacing sx,sy,sz)",
+             (--dims X,Y,Z --type u8|i8|u16|i16|u32|i32|f32|f64 --spacing sx,sy,sz)",
             path.display()
         )
     } else {
@@ -117,9 +117,32 @@ pub(crate) fn decode_samples(
     voxel_type: VoxelType,
     big_endian: bool,
     out: &mut [f32],
-) {
+) -> Rounding {
     debug_assert_eq!(bytes.len(), out.len() * voxel_type.bytes());
+    let mut r = Rounding::default();
+    macro_rules! wide {
+        ($t:ty, $n:literal) => {
+            for (o, c) in out.iter_mut().zip(bytes.chunks_exact($n)) {
+                let a: [u8; $n] = c.try_into().unwrap();
+                let x = if big_endian {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                } as f64;
+                *o = x as f32;
+                r.note(x, *o);
+            }
+        };
+    }
     match voxel_type {
+        VoxelType::I8 => {
+            for (o, &b) in out.iter_mut().zip(bytes) {
+                *o = b as i8 as f32;
+            }
+        }
+        VoxelType::I32 => wide!(i32, 4),
+        VoxelType::U32 => wide!(u32, 4),
+        VoxelType::F64 => wide!(f64, 8),
         VoxelType::U8 => {
             for (o, &b) in out.iter_mut().zip(bytes) {
                 *o = b as f32;
@@ -156,6 +179,43 @@ pub(crate) fn decode_samples(
             }
         }
     }
+    r
+}
+
+/// What converting samples to `f32` changed: how many values, and the
+/// largest change (data units). NaN and ±Inf are not counted (they are
+/// refused, naming the voxel, by the reader).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Rounding {
+    pub changed: u64,
+    pub max_change: f64,
+}
+
+impl Rounding {
+    fn note(&mut self, exact: f64, stored: f32) {
+        let d = (stored as f64 - exact).abs();
+        if d > 0.0 && d.is_finite() {
+            self.changed += 1;
+            self.max_change = self.max_change.max(d);
+        }
+    }
+
+    pub fn add(&mut self, o: Rounding) {
+        self.changed += o.changed;
+        self.max_change = self.max_change.max(o.max_change);
+    }
+
+    /// The note a reader gives after a whole volume.
+    pub fn note_for(&self, label: &str, t: VoxelType) -> Option<String> {
+        (self.changed > 0).then(|| {
+            format!(
+                "{label}: {} {} values were rounded to the nearest 32-bit float (largest change {:.3e})",
+                self.changed,
+                t.name(),
+                self.max_change
+            )
+        })
+    }
 }
 
 /// Converts data values to packed samples of `voxel_type` (appended to
@@ -172,6 +232,37 @@ pub(crate) fn encode_samples(
     let int = |v: f32| (v as f64).round().clamp(lo, hi);
     match voxel_type {
         VoxelType::U8 => out.extend(values.iter().map(|&v| int(v) as u8)),
+        VoxelType::I8 => out.extend(values.iter().map(|&v| int(v) as i8 as u8)),
+        VoxelType::I32 => {
+            for &v in values {
+                let x = int(v) as i32;
+                out.extend_from_slice(&if big_endian {
+                    x.to_be_bytes()
+                } else {
+                    x.to_le_bytes()
+                });
+            }
+        }
+        VoxelType::U32 => {
+            for &v in values {
+                let x = int(v) as u32;
+                out.extend_from_slice(&if big_endian {
+                    x.to_be_bytes()
+                } else {
+                    x.to_le_bytes()
+                });
+            }
+        }
+        VoxelType::F64 => {
+            for &v in values {
+                let x = v as f64;
+                out.extend_from_slice(&if big_endian {
+                    x.to_be_bytes()
+                } else {
+                    x.to_le_bytes()
+                });
+            }
+        }
         VoxelType::U16 => {
             for &v in values {
                 let x = int(v) as u16;

@@ -32,13 +32,13 @@ fn datatype(code: i16) -> (Option<VoxelType>, &'static str) {
         4 => (Some(VoxelType::I16), "int16"),
         16 => (Some(VoxelType::F32), "float32"),
         512 => (Some(VoxelType::U16), "uint16"),
+        8 => (Some(VoxelType::I32), "int32"),
+        64 => (Some(VoxelType::F64), "float64"),
+        256 => (Some(VoxelType::I8), "int8"),
+        768 => (Some(VoxelType::U32), "uint32"),
         1 => (None, "binary"),
-        8 => (None, "int32"),
         32 => (None, "complex64"),
-        64 => (None, "float64"),
         128 => (None, "rgb24"),
-        256 => (None, "int8"),
-        768 => (None, "uint32"),
         1024 => (None, "int64"),
         1280 => (None, "uint64"),
         1536 => (None, "float128"),
@@ -60,7 +60,7 @@ fn datatype(code: i16) -> (Option<VoxelType>, &'static str) {
 /// type's limits, not the data, because it is made before any voxel is read.
 fn scaled_type(stored: VoxelType, slope: f64, inter: f64) -> VoxelType {
     let integer = |x: f64| x.fract() == 0.0 && x.abs() < 1e9;
-    if stored == VoxelType::F32 || !integer(slope) || !integer(inter) {
+    if stored.is_float() || stored.may_round() || !integer(slope) || !integer(inter) {
         return VoxelType::F32;
     }
     let (lo, hi) = stored.limits();
@@ -137,7 +137,7 @@ pub fn open_nifti(path: &Path) -> Result<RawSource> {
     let (stored, type_name) = datatype(h.datatype);
     let Some(stored) = stored else {
         bail!(
-            "{label}: datatype {} ({type_name}) is not supported (use uint8, int16, uint16 or float32)",
+            "{label}: datatype {} ({type_name}) is not supported (use int8, uint8, int16, uint16, int32, uint32, float32 or float64)",
             h.datatype
         );
     };
@@ -311,9 +311,9 @@ mod tests {
             write(&p, &bytes);
             open_nifti(&p).err().expect("must fail").to_string()
         };
-        let err = case(header([2, 2, 2], 64, 64, [1.0; 3], 0.0, 0.0, false));
+        let err = case(header([2, 2, 2], 1024, 64, [1.0; 3], 0.0, 0.0, false));
         assert!(
-            err.contains("bad.nii") && err.contains("datatype 64 (float64)"),
+            err.contains("bad.nii") && err.contains("datatype 1024 (int64)"),
             "{err}"
         );
 

@@ -58,18 +58,11 @@ fn parse_type(label: &str, value: &str) -> Result<VoxelType> {
             VoxelType::I16
         }
         "float" => VoxelType::F32,
-        "signed char"
-        | "int8"
-        | "int8_t"
-        | "int"
-        | "signed int"
-        | "int32"
-        | "int32_t"
-        | "uint"
-        | "unsigned int"
-        | "uint32"
-        | "uint32_t"
-        | "longlong"
+        "signed char" | "int8" | "int8_t" => VoxelType::I8,
+        "int" | "signed int" | "int32" | "int32_t" => VoxelType::I32,
+        "uint" | "unsigned int" | "uint32" | "uint32_t" => VoxelType::U32,
+        "double" => VoxelType::F64,
+        "longlong"
         | "long long"
         | "long long int"
         | "signed long long"
@@ -81,9 +74,8 @@ fn parse_type(label: &str, value: &str) -> Result<VoxelType> {
         | "unsigned long long int"
         | "uint64"
         | "uint64_t"
-        | "double"
         | "block" => {
-            bail!("{label}: type '{value}' is not supported (use uint8, uint16, int16 or float)")
+            bail!("{label}: type '{value}' is not supported (use int8, uint8, int16, uint16, int32, uint32, float or double)")
         }
         _ => bail!("{label}: type '{value}' is not a NRRD type"),
     })
@@ -436,6 +428,10 @@ fn type_name(t: VoxelType) -> &'static str {
         VoxelType::U16 => "uint16",
         VoxelType::I16 => "int16",
         VoxelType::F32 => "float",
+        VoxelType::I8 => "int8",
+        VoxelType::I32 => "int32",
+        VoxelType::U32 => "uint32",
+        VoxelType::F64 => "double",
     }
 }
 
@@ -616,6 +612,12 @@ mod tests {
                 VoxelType::U16 => ((x * 4099) % 65536) as f32,
                 VoxelType::I16 => ((x * 4099) % 65536) as f32 - 32768.0,
                 VoxelType::F32 => (x as f32 - 17.0) * 0.123_456_7 + 1e-30,
+                VoxelType::I8 => ((x * 37) % 256) as f32 - 128.0,
+                // Integers an f32 holds exactly, with the sign and range of
+                // the type (|x| ≤ 2²⁴).
+                VoxelType::I32 => ((x * 279_841) % (1 << 24)) as f32 - 8_388_608.0,
+                VoxelType::U32 => ((x * 279_841) % (1 << 24)) as f32,
+                VoxelType::F64 => (x as f32 - 17.0) * 0.123_456_7 + 1e-30,
             })
             .collect()
     }
@@ -629,6 +631,10 @@ mod tests {
             VoxelType::U16,
             VoxelType::I16,
             VoxelType::F32,
+            VoxelType::I8,
+            VoxelType::I32,
+            VoxelType::U32,
+            VoxelType::F64,
         ] {
             let path = dir.path().join(format!("rt-{}.nrrd", t.name()));
             let values = test_values(t, 60);
@@ -786,9 +792,9 @@ mod tests {
         };
         let cases: Vec<(String, Vec<u8>, &str)> = vec![
             (
-                base("double", "3", "2 2 2", "raw", "endian: little\n"),
+                base("int64", "3", "2 2 2", "raw", "endian: little\n"),
                 vec![0; 64],
-                "type 'double' is not supported",
+                "type 'int64' is not supported",
             ),
             (
                 base("quux", "3", "2 2 2", "raw", ""),
@@ -942,5 +948,100 @@ mod tests {
         assert_eq!(src.info().spacing, [2.0, 3.0, 4.0]);
         let v = Volume::read_all(&mut src).unwrap();
         assert_eq!(v.data, vec![1.0, 2.0, 3.0, 4.0]);
+    }
+}
+
+#[cfg(test)]
+mod wide_types {
+    use super::*;
+    use parallax_common::volume::Volume;
+
+    /// numpy's default float64, and 32-bit integers beyond what an f32
+    /// holds: they import, rounded to the nearest f32, and the reader says
+    /// how many values changed and by how much.
+    #[test]
+    fn doubles_and_wide_integers_import_and_say_what_rounding_changed() {
+        let dir = tempfile::tempdir().unwrap();
+        let cases: [(&str, Vec<u8>, f64); 3] = [
+            (
+                "double",
+                [0.1f64, 1.0, 2.5, 1e10 + 0.5, -3.0, 0.0, 7.0, 1.0 / 3.0]
+                    .iter()
+                    .flat_map(|x| x.to_le_bytes())
+                    .collect(),
+                0.0,
+            ),
+            (
+                "int32",
+                [16_777_217i32, -5, 0, 7, i32::MAX, i32::MIN, 3, 4]
+                    .iter()
+                    .flat_map(|x| x.to_le_bytes())
+                    .collect(),
+                1.0,
+            ),
+            (
+                "uint32",
+                [16_777_217u32, 5, 0, 7, u32::MAX, 1, 3, 4]
+                    .iter()
+                    .flat_map(|x| x.to_le_bytes())
+                    .collect(),
+                1.0,
+            ),
+        ];
+        for (t, data, _) in &cases {
+            let p = dir.path().join(format!("{t}.nrrd"));
+            let mut bytes = format!(
+                "NRRD0004\ntype: {t}\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nendian: little\n\n"
+            )
+            .into_bytes();
+            bytes.extend_from_slice(data);
+            fs::write(&p, bytes).unwrap();
+            let mut src = crate::data::open(&p, None).unwrap();
+            let v = Volume::read_all(&mut *src).unwrap();
+            assert_eq!(v.data.len(), 8);
+            let note = src
+                .conversion_note()
+                .unwrap_or_else(|| panic!("{t}: no note"));
+            assert!(
+                note.contains(&format!("{t}.nrrd")) && note.contains("rounded"),
+                "{note}"
+            );
+            match *t {
+                "double" => {
+                    assert_eq!(v.data[2], 2.5);
+                    assert_eq!(v.data[0], 0.1f32);
+                    assert!(note.contains("3 f64 values"), "{note}");
+                }
+                "int32" => {
+                    assert_eq!(v.data[1], -5.0);
+                    assert_eq!(v.data[5], i32::MIN as f32);
+                    assert!(note.contains("2 i32 values"), "{note}");
+                }
+                _ => {
+                    assert_eq!(v.data[1], 5.0);
+                    assert!(note.contains("2 u32 values"), "{note}");
+                }
+            }
+        }
+        // int8 is exact: no note.
+        let p = dir.path().join("i8.nrrd");
+        let mut bytes =
+            b"NRRD0004\ntype: int8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n".to_vec();
+        bytes.extend_from_slice(&[0x80, 0xff, 0, 1, 2, 3, 0x7f, 5]);
+        fs::write(&p, bytes).unwrap();
+        let mut src = crate::data::open(&p, None).unwrap();
+        let v = Volume::read_all(&mut *src).unwrap();
+        assert_eq!(&v.data[..3], &[-128.0, -1.0, 0.0]);
+        assert_eq!(v.data[6], 127.0);
+        assert!(src.conversion_note().is_none());
+        // A double too large for f32 is refused, naming the voxel.
+        let p = dir.path().join("huge.nrrd");
+        let mut bytes = b"NRRD0004\ntype: double\ndimension: 3\nsizes: 2 1 1\nencoding: raw\nendian: little\n\n".to_vec();
+        bytes.extend(1e300f64.to_le_bytes());
+        bytes.extend(1.0f64.to_le_bytes());
+        fs::write(&p, bytes).unwrap();
+        let mut src = crate::data::open(&p, None).unwrap();
+        let e = format!("{:#}", Volume::read_all(&mut *src).unwrap_err());
+        assert!(e.contains("huge.nrrd"), "{e}");
     }
 }

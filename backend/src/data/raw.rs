@@ -36,6 +36,8 @@ pub struct RawSource {
     compressed: bool,
     next_slice: usize,
     buf: Vec<u8>,
+    /// What converting the samples to f32 changed so far.
+    rounding: super::Rounding,
 }
 
 impl RawSource {
@@ -60,6 +62,7 @@ impl RawSource {
             compressed,
             next_slice: 0,
             buf: Vec::new(),
+            rounding: Default::default(),
         }
     }
 
@@ -84,13 +87,14 @@ impl RawSource {
             }
             bail!("{}: reading slice {k} of {nz}: {e}", self.label);
         }
-        decode_samples(&self.buf, self.stored, self.big_endian, out);
+        let r = decode_samples(&self.buf, self.stored, self.big_endian, out);
+        self.rounding.add(r);
         if let Some((slope, inter)) = self.scale {
             for v in out.iter_mut() {
                 *v = (slope * *v as f64 + inter) as f32;
             }
         }
-        if self.stored == VoxelType::F32 || self.scale.is_some() {
+        if self.stored.is_float() || self.stored.may_round() || self.scale.is_some() {
             let first = k as u64 * self.info.slice_len() as u64;
             check_finite(&self.label, self.info.dims, first, out)?;
         }
@@ -101,6 +105,10 @@ impl RawSource {
 impl VolumeSource for RawSource {
     fn info(&self) -> &VolumeInfo {
         &self.info
+    }
+
+    fn conversion_note(&self) -> Option<String> {
+        self.rounding.note_for(&self.label, self.stored)
     }
 
     fn read_slices(&mut self, out: &mut [f32]) -> Result<()> {
