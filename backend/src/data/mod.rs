@@ -230,68 +230,28 @@ pub(crate) fn encode_samples(
     out.reserve(values.len() * voxel_type.bytes());
     let (lo, hi) = voxel_type.limits();
     let int = |v: f32| (v as f64).round().clamp(lo, hi);
+    // Each value converted by `$conv`, then written in the byte order asked.
+    macro_rules! put {
+        ($conv:expr) => {
+            for &v in values {
+                let x = $conv(v);
+                out.extend_from_slice(&if big_endian {
+                    x.to_be_bytes()
+                } else {
+                    x.to_le_bytes()
+                });
+            }
+        };
+    }
     match voxel_type {
         VoxelType::U8 => out.extend(values.iter().map(|&v| int(v) as u8)),
         VoxelType::I8 => out.extend(values.iter().map(|&v| int(v) as i8 as u8)),
-        VoxelType::I32 => {
-            for &v in values {
-                let x = int(v) as i32;
-                out.extend_from_slice(&if big_endian {
-                    x.to_be_bytes()
-                } else {
-                    x.to_le_bytes()
-                });
-            }
-        }
-        VoxelType::U32 => {
-            for &v in values {
-                let x = int(v) as u32;
-                out.extend_from_slice(&if big_endian {
-                    x.to_be_bytes()
-                } else {
-                    x.to_le_bytes()
-                });
-            }
-        }
-        VoxelType::F64 => {
-            for &v in values {
-                let x = v as f64;
-                out.extend_from_slice(&if big_endian {
-                    x.to_be_bytes()
-                } else {
-                    x.to_le_bytes()
-                });
-            }
-        }
-        VoxelType::U16 => {
-            for &v in values {
-                let x = int(v) as u16;
-                out.extend_from_slice(&if big_endian {
-                    x.to_be_bytes()
-                } else {
-                    x.to_le_bytes()
-                });
-            }
-        }
-        VoxelType::I16 => {
-            for &v in values {
-                let x = int(v) as i16;
-                out.extend_from_slice(&if big_endian {
-                    x.to_be_bytes()
-                } else {
-                    x.to_le_bytes()
-                });
-            }
-        }
-        VoxelType::F32 => {
-            for &v in values {
-                out.extend_from_slice(&if big_endian {
-                    v.to_be_bytes()
-                } else {
-                    v.to_le_bytes()
-                });
-            }
-        }
+        VoxelType::U16 => put!(|v| int(v) as u16),
+        VoxelType::I16 => put!(|v| int(v) as i16),
+        VoxelType::U32 => put!(|v| int(v) as u32),
+        VoxelType::I32 => put!(|v| int(v) as i32),
+        VoxelType::F32 => put!(|v: f32| v),
+        VoxelType::F64 => put!(|v: f32| v as f64),
     }
 }
 
