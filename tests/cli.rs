@@ -110,11 +110,11 @@ fn bad_input_gets_a_clear_error_and_keeps_existing_output() {
     let nrrd = d.path().join("a.nrrd");
     std::fs::write(
         &nrrd,
-        "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: ascii\n\n0 1 2 3 4 5 6 7\n",
+        "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: hex\n\n0001020304050607\n",
     )
     .unwrap();
     let e = fails(&["import", s(&nrrd), "-o", s(&out)]);
-    assert!(e.contains("a.nrrd") && e.contains("ascii"), "{e}");
+    assert!(e.contains("a.nrrd") && e.contains("hex"), "{e}");
     let e = fails(&[
         "import",
         s(&raw),

@@ -200,6 +200,11 @@ impl Rounding {
         }
     }
 
+    /// Counts one value read exactly as `exact` and stored as `stored`.
+    pub fn add_value(&mut self, exact: f64, stored: f32) {
+        self.note(exact, stored);
+    }
+
     pub fn add(&mut self, o: Rounding) {
         self.changed += o.changed;
         self.max_change = self.max_change.max(o.max_change);

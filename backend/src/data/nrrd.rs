@@ -3,7 +3,7 @@
 //! NRRD is the format Parallax writes for procedural volumes and the one most
 //! volume tools can exchange with it (DESIGN.md "Data"). The reader handles
 //! what such tools write for a 3-D scalar volume: attached (`.nrrd`) and
-//! detached (`.nhdr` + `data file`) headers, `raw` and `gzip` encodings,
+//! detached (`.nhdr` + `data file`) headers, `raw`, `gzip` and `ascii` encodings,
 //! either byte order, `spacings` or `space directions`. The writer streams
 //! slice by slice so that a volume larger than RAM can be produced.
 
@@ -27,6 +27,8 @@ const MAX_HEADER_BYTES: u64 = 1 << 20;
 pub enum NrrdEncoding {
     Raw,
     Gzip,
+    /// Values written as text, separated by white space.
+    Ascii,
 }
 
 /// What a NRRD header says about a 3-D scalar volume.
@@ -85,10 +87,11 @@ fn parse_encoding(label: &str, value: &str) -> Result<NrrdEncoding> {
     Ok(match value {
         "raw" => NrrdEncoding::Raw,
         "gzip" | "gz" => NrrdEncoding::Gzip,
-        "ascii" | "text" | "txt" | "hex" | "bzip2" | "bz2" => {
-            bail!("{label}: encoding '{value}' is not supported (use raw or gzip)")
+        "ascii" | "text" | "txt" => NrrdEncoding::Ascii,
+        "hex" | "bzip2" | "bz2" => {
+            bail!("{label}: encoding '{value}' is not supported (use raw, gzip or ascii)")
         }
-        _ => bail!("{label}: encoding '{value}' is not a NRRD encoding (use raw or gzip)"),
+        _ => bail!("{label}: encoding '{value}' is not a NRRD encoding (use raw, gzip or ascii)"),
     })
 }
 
@@ -252,7 +255,7 @@ pub fn read_header(path: &Path) -> Result<(NrrdHeader, BufReader<File>, u64)> {
         Some("little") => false,
         Some("big") => true,
         Some(e) => bail!("{label}: endian: '{e}' is not 'little' or 'big'"),
-        None if voxel_type.bytes() == 1 => false,
+        None if voxel_type.bytes() == 1 || encoding == NrrdEncoding::Ascii => false,
         None => bail!(
             "{label}: missing field 'endian' (required for type {})",
             voxel_type.name()
@@ -405,6 +408,11 @@ pub fn open_nrrd(path: &Path) -> Result<RawSource> {
                 false,
                 Box::new(reader),
             ))
+        }
+        NrrdEncoding::Ascii => {
+            skip_bytes(&mut reader, header.byte_skip.max(0) as u64)
+                .with_context(|| format!("{label}: byte skip {}", header.byte_skip))?;
+            Ok(RawSource::from_reader(label, info, false, false, Box::new(reader)).as_text())
         }
         NrrdEncoding::Gzip => {
             let mut dec = MultiGzDecoder::new(reader);
@@ -804,7 +812,7 @@ mod tests {
             (
                 base("uchar", "3", "2 2 2", "bzip2", ""),
                 vec![0; 8],
-                "encoding 'bzip2' is not supported (use raw or gzip)",
+                "encoding 'bzip2' is not supported (use raw, gzip or ascii)",
             ),
             (
                 base("uchar", "3", "2 2 2", "hex", ""),
@@ -887,13 +895,13 @@ mod tests {
         }
         let err = open_error(
             d,
-            &base("uchar", "3", "2 2 2", "ascii", ""),
-            b"1 2 3 4 5 6 7 8",
+            &base("uchar", "3", "2 2 2", "hex", ""),
+            b"0102030405060708",
         );
         assert_eq!(
             err,
             format!(
-                "{}: encoding 'ascii' is not supported (use raw or gzip)",
+                "{}: encoding 'hex' is not supported (use raw, gzip or ascii)",
                 d.join("bad.nrrd").display()
             )
         );
@@ -1043,5 +1051,53 @@ mod wide_types {
         let mut src = crate::data::open(&p, None).unwrap();
         let e = format!("{:#}", Volume::read_all(&mut *src).unwrap_err());
         assert!(e.contains("huge.nrrd"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod ascii {
+    use super::*;
+    use parallax_common::volume::Volume;
+
+    fn read(dir: &Path, t: &str, text: &str) -> Result<Volume> {
+        let p = dir.join("a.nrrd");
+        fs::write(
+            &p,
+            format!("NRRD0004\ntype: {t}\ndimension: 3\nsizes: 2 2 2\nencoding: ascii\n\n{text}"),
+        )
+        .unwrap();
+        let mut src = crate::data::open(&p, None)?;
+        Volume::read_all(&mut *src)
+    }
+
+    /// `encoding: ascii` (also `text`, `txt`): white-space separated values,
+    /// across lines, as integers or floats; short data, junk and values out
+    /// of the type's range are refused naming the value.
+    #[test]
+    fn ascii_values_import_and_bad_ones_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let v = read(d, "short", "1 -2 3\n4\t5   6\n7 8\n").unwrap();
+        assert_eq!(v.data, vec![1.0, -2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]);
+        assert_eq!(v.info.voxel_type, VoxelType::I16);
+        let v = read(d, "double", "0.5 1e-3 2 3 4 5 6 7.25").unwrap();
+        assert_eq!(v.data[1], 1e-3f32);
+        assert_eq!(v.data[7], 7.25);
+        for (t, text, want) in [
+            ("uchar", "1 2 3 4 5 6 7", "truncated"),
+            ("uchar", "1 2 x 4 5 6 7 8", "value 2 ('x') is not a number"),
+            (
+                "uchar",
+                "1 2 3 4 5 6 7 300",
+                "value 7 (300) is outside the range of u8",
+            ),
+            ("float", "1 2 3 nan 5 6 7 8", "NaN"),
+        ] {
+            let e = format!("{:#}", read(d, t, text).unwrap_err());
+            assert!(
+                e.contains("a.nrrd") && e.contains(want),
+                "{t} {text:?}: {e}"
+            );
+        }
     }
 }

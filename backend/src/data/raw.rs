@@ -38,6 +38,10 @@ pub struct RawSource {
     buf: Vec<u8>,
     /// What converting the samples to f32 changed so far.
     rounding: super::Rounding,
+    /// Values are text separated by white space (NRRD `encoding: ascii`).
+    text: bool,
+    /// Values read so far (text), for naming a bad one.
+    values_read: u64,
 }
 
 impl RawSource {
@@ -63,6 +67,8 @@ impl RawSource {
             next_slice: 0,
             buf: Vec::new(),
             rounding: Default::default(),
+            text: false,
+            values_read: 0,
         }
     }
 
@@ -74,7 +80,78 @@ impl RawSource {
         self
     }
 
+    /// The stream holds values as text separated by white space.
+    pub fn as_text(mut self) -> Self {
+        self.text = true;
+        self
+    }
+
+    /// One slice of text values, converted as binary samples are.
+    fn read_text_slice(&mut self, k: usize, out: &mut [f32]) -> Result<()> {
+        let nz = self.info.dims[2];
+        let mut token = Vec::with_capacity(32);
+        for o in out.iter_mut() {
+            token.clear();
+            let mut byte = [0u8; 1];
+            loop {
+                let n = self
+                    .reader
+                    .read(&mut byte)
+                    .with_context(|| format!("{}: reading slice {k} of {nz}", self.label))?;
+                if n == 0 {
+                    break;
+                }
+                if byte[0].is_ascii_whitespace() {
+                    if token.is_empty() {
+                        continue;
+                    }
+                    break;
+                }
+                token.push(byte[0]);
+                ensure!(
+                    token.len() <= 64,
+                    "{}: value {} is not a number (over 64 characters)",
+                    self.label,
+                    self.values_read
+                );
+            }
+            if token.is_empty() {
+                bail!(
+                    "{}: the data ends in slice {k} of {nz} (z = 0..{}), after {} values: the file is truncated",
+                    self.label,
+                    nz - 1,
+                    self.values_read
+                );
+            }
+            let text = String::from_utf8_lossy(&token);
+            let x: f64 = text.parse().map_err(|_| {
+                anyhow::anyhow!(
+                    "{}: value {} ('{text}') is not a number",
+                    self.label,
+                    self.values_read
+                )
+            })?;
+            let (lo, hi) = self.stored.limits();
+            ensure!(
+                !x.is_finite() || (lo..=hi).contains(&x),
+                "{}: value {} ({x}) is outside the range of {}",
+                self.label,
+                self.values_read,
+                self.stored.name()
+            );
+            *o = x as f32;
+            self.rounding.add_value(x, *o);
+            self.values_read += 1;
+        }
+        Ok(())
+    }
+
     fn read_slice(&mut self, k: usize, out: &mut [f32]) -> Result<()> {
+        if self.text {
+            self.read_text_slice(k, out)?;
+            let first = k as u64 * self.info.slice_len() as u64;
+            return check_finite(&self.label, self.info.dims, first, out);
+        }
         let nz = self.info.dims[2];
         self.buf.resize(out.len() * self.stored.bytes(), 0);
         if let Err(e) = self.reader.read_exact(&mut self.buf) {
