@@ -63,11 +63,19 @@ pub fn load_display(scene: &Scene, over: Option<&PathBuf>) -> Result<Display> {
 }
 
 /// Runs a whole session over `transport` and tells the back ends to quit at
-/// the end (also after an error, so no back end is left waiting).
+/// the end (also after an error, so no back end is left waiting; after a
+/// watchdog error the caller ends the unresponsive ranks).
 pub fn run(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSummary> {
     transport.set_watchdog(opts.watchdog);
     let result = run_frames(opts, transport);
-    let _ = transport.broadcast(&ToBackend::Quit);
+    // Ranks that stopped answering cannot take part in a broadcast either:
+    // the launcher ends them (cluster::abort_job); the others are told to
+    // quit.
+    let unresponsive =
+        matches!(&result, Err(e) if e.is::<parallax_common::protocol::Unresponsive>());
+    if !unresponsive {
+        let _ = transport.broadcast(&ToBackend::Quit);
+    }
     result
 }
 
