@@ -50,8 +50,6 @@ pub struct RunSummary {
     /// Per frame: front-end wall time not spent inside the slowest back
     /// end's frame — what coordination (broadcast, gather, swap lock) costs.
     pub coordination_ms: Vec<f64>,
-    /// The last frame's figures from every back end.
-    pub last: Vec<FrameStats>,
 }
 
 /// The display a scene renders to.
@@ -196,13 +194,14 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             f.flush()?;
         }
         let wall = *summary.wall_ms.last().unwrap();
+        let slowest = stats.iter().map(|s| s.total_ms).fold(0.0, f64::max);
+        summary.coordination_ms.push((wall - slowest).max(0.0));
         if let Some(f) = frontend_file.as_mut() {
-            let slowest = stats.iter().map(|s| s.total_ms).fold(0.0, f64::max);
             let line = serde_json::json!({
                 "frame": frame,
                 "wall_ms": wall,
                 "slowest_backend_ms": slowest,
-                "coordination_ms": (wall - slowest).max(0.0),
+                "coordination_ms": summary.coordination_ms.last().unwrap(),
                 "state_bytes": summary.state_bytes.last().unwrap(),
                 "backends": stats.len(),
             });
@@ -213,10 +212,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         if opts.verbose {
             println!("{}", frame_line(frame, &stats, wall));
         }
-        let slowest = stats.iter().map(|s| s.total_ms).fold(0.0, f64::max);
-        summary.coordination_ms.push((wall - slowest).max(0.0));
         let converged = stats.iter().all(|s| s.adequate && s.uploaded == 0);
-        summary.last = stats;
         if until_converged && converged {
             break;
         }
