@@ -4,8 +4,8 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use parallax_backend::data::{self, synth::SynthKind, RawParams};
 use parallax_backend::store::{self, info, ImportOptions};
-use parallax_common::octree::{BrickEncoding, OctreeDb};
-use parallax_common::volume::VoxelType;
+use parallax_backend::store::{BrickEncoding, OctreeDb};
+use parallax_backend::volume::VoxelType;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -354,7 +354,7 @@ fn run(cli: Cli) -> Result<()> {
                 .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
                 .with_context(|| format!("--size '{size}': expected WxH, e.g. 160x120"))?;
             let mut src = data::open(&volume, None)?;
-            let vol = parallax_common::volume::Volume::read_all(src.as_mut())?;
+            let vol = parallax_backend::volume::Volume::read_all(src.as_mut())?;
             let tf = parallax_common::tf::TransferFunction::load(&tf)?;
             let placement = parallax_common::camera::Placement {
                 center: [0.0, 0.0, 0.0],

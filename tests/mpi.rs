@@ -404,7 +404,7 @@ fn an_upload_budget_of_4_converges_and_says_it_held_the_cut_back() {
 
 #[test]
 fn a_corrupt_brick_is_named_and_the_run_goes_on() {
-    use parallax_common::octree::{NodeKey, OctreeDb};
+    use parallax_backend::store::{NodeKey, OctreeDb};
     let w = World::new();
     let bad = w.path("bad.pxo");
     std::fs::copy(w.path("v.pxo"), &bad).unwrap();

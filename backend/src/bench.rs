@@ -4,13 +4,14 @@
 
 use crate::reference::{self, Tolerance};
 use crate::render::Renderer;
+use crate::store::BrickEncoding;
 use crate::store::{self, ImportOptions};
-use anyhow::{Context, Result};
+use crate::volume::{MemorySource, Volume};
+use anyhow::Result;
+use parallax_common::atomic::AtomicFile;
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{RenderConfig, Shading};
-use parallax_common::octree::BrickEncoding;
 use parallax_common::tf::TransferFunction;
-use parallax_common::volume::{MemorySource, Volume};
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
@@ -353,9 +354,7 @@ pub fn run_kernels(
 }
 
 fn write_kernels_csv(path: &Path, points: &[KernelPoint]) -> Result<()> {
-    let mut f = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("{}", path.display()))?,
-    );
+    let mut f = AtomicFile::create(path)?;
     writeln!(f, "kernel,frame_ms,render_ms,ratio_to_dvr,rmse_vs_dvr")?;
     let base = points.first().map_or(1.0, |p| p.render_ms);
     for p in points {
@@ -369,7 +368,7 @@ fn write_kernels_csv(path: &Path, points: &[KernelPoint]) -> Result<()> {
             p.diff_from_dvr
         )?;
     }
-    Ok(())
+    f.commit()
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -378,9 +377,7 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 fn write_csv(path: &Path, points: &[Point]) -> Result<()> {
-    let mut f = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("{}", path.display()))?,
-    );
+    let mut f = AtomicFile::create(path)?;
     writeln!(
         f,
         "knob,value,bricks,frame_ms,render_ms,rmse,max_abs,psnr_db,bricks_in_cut"
@@ -392,7 +389,7 @@ fn write_csv(path: &Path, points: &[Point]) -> Result<()> {
             p.knob, p.value, p.bricks, p.frame_ms, p.render_ms, p.rmse, p.max_abs, p.psnr, p.leaves
         )?;
     }
-    Ok(())
+    f.commit()
 }
 
 /// Work–precision plot: RMSE (log) against frame time, one series per knob.

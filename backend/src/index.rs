@@ -21,9 +21,9 @@
 //! its entry point. Every node keeps its data slot and range, so the ray
 //! caster can also read parent and grandparent data (G10 §5).
 
+use crate::store::NodeKey;
 use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
-use parallax_common::octree::NodeKey;
 use std::collections::HashMap;
 
 pub const NONE16: u32 = 0xFFFF;

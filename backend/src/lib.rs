@@ -15,3 +15,4 @@ pub mod reference;
 pub mod render;
 pub mod simulate;
 pub mod store;
+pub mod volume;

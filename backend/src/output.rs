@@ -3,6 +3,7 @@
 //! (float32, H×W×4, linear, premultiplied) for the exact output.
 
 use anyhow::{Context, Result};
+use parallax_common::atomic::AtomicFile;
 use std::io::Write;
 use std::path::Path;
 
@@ -34,9 +35,8 @@ fn check_len(path: &Path, width: u32, height: u32, px: &[[f32; 4]]) -> Result<()
 /// Writes a premultiplied RGBA image as an sRGB PNG (colour over black).
 pub fn write_png(path: &Path, width: u32, height: u32, px: &[[f32; 4]]) -> Result<()> {
     check_len(path, width, height, px)?;
-    let file = std::fs::File::create(path)
-        .with_context(|| format!("{}: cannot create", path.display()))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    let mut file = AtomicFile::create(path)?;
+    let mut enc = png::Encoder::new(&mut file, width, height);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
     enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
@@ -47,7 +47,7 @@ pub fn write_png(path: &Path, width: u32, height: u32, px: &[[f32; 4]]) -> Resul
         .collect();
     w.write_image_data(&data)?;
     w.finish()?;
-    Ok(())
+    file.commit()
 }
 
 /// Writes H×W×4 float32 values as a NumPy `.npy` file (format 1.0).
@@ -59,16 +59,12 @@ pub fn write_npy(path: &Path, width: u32, height: u32, px: &[[f32; 4]]) -> Resul
     let total = 10 + header.len() + 1;
     header.push_str(&" ".repeat(total.next_multiple_of(64) - total));
     header.push('\n');
-    let mut f = std::io::BufWriter::new(
-        std::fs::File::create(path)
-            .with_context(|| format!("{}: cannot create", path.display()))?,
-    );
+    let mut f = AtomicFile::create(path)?;
     f.write_all(b"\x93NUMPY\x01\x00")?;
     f.write_all(&(header.len() as u16).to_le_bytes())?;
     f.write_all(header.as_bytes())?;
     f.write_all(bytemuck::cast_slice(px))?;
-    f.flush()?;
-    Ok(())
+    f.commit()
 }
 
 /// Reads back a file written by [`write_npy`]: (width, height, pixels).

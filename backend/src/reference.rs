@@ -16,11 +16,11 @@
 //! stops once the transmittance T is below the tolerance (colours are ≤ 1, so
 //! the rest can add at most T).
 
+use crate::volume::Volume;
 use glam::DVec3;
 use parallax_common::camera::{Placement, View};
 use parallax_common::tf::TransferFunction;
 use parallax_common::tools::ClipPlane;
-use parallax_common::volume::Volume;
 use rayon::prelude::*;
 use std::sync::OnceLock;
 

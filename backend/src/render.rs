@@ -9,10 +9,10 @@ use crate::raycast::{
     BrickPool, Filtering, KernelKey, Raycaster, RenderInputs, RenderSettings, SceneGeometry,
     TfTable, ToolParams,
 };
+use crate::store::{BrickEncoding, OctreeDb};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Interpolation, Mode, RenderConfig, Shading};
-use parallax_common::octree::{BrickEncoding, OctreeDb};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::tools::{Tool, MAX_ENHANCERS};

@@ -2,8 +2,8 @@
 //! neighbours, inner nodes against their children, corruption detection.
 
 use parallax_backend::store::{self, info, ImportOptions};
-use parallax_common::octree::{BrickEncoding, NodeKey, OctreeDb, OVERLAP};
-use parallax_common::volume::{MemorySource, Volume, VoxelType};
+use parallax_backend::store::{BrickEncoding, NodeKey, OctreeDb, OVERLAP};
+use parallax_backend::volume::{MemorySource, Volume, VoxelType};
 use std::path::Path;
 
 /// A signed, anisotropic test volume with structure at every scale and a
@@ -298,8 +298,8 @@ fn a_failed_import_keeps_the_existing_file_and_leaves_no_temporary() {
     assert!(format!("{e:#}").contains("--memory-mb"), "{e:#}");
     // a source that fails halfway through
     struct Failing<'a>(MemorySource<'a>, usize);
-    impl parallax_common::volume::VolumeSource for Failing<'_> {
-        fn info(&self) -> &parallax_common::volume::VolumeInfo {
+    impl parallax_backend::volume::VolumeSource for Failing<'_> {
+        fn info(&self) -> &parallax_backend::volume::VolumeInfo {
             self.0.info()
         }
         fn read_slices(&mut self, out: &mut [f32]) -> anyhow::Result<()> {

@@ -5,9 +5,9 @@
 use parallax_backend::index::SpatialIndex;
 use parallax_backend::loader::{FrameCut, Loader, LoaderConfig};
 use parallax_backend::store::{self, ImportOptions};
+use parallax_backend::store::{NodeKey, OctreeDb};
+use parallax_backend::volume::{MemorySource, Volume, VoxelType};
 use parallax_common::camera::{Placement, View};
-use parallax_common::octree::{NodeKey, OctreeDb};
-use parallax_common::volume::{MemorySource, Volume, VoxelType};
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
 use std::sync::Arc;

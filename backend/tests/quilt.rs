@@ -10,10 +10,10 @@ use parallax_backend::quilt::{
 };
 use parallax_backend::render::Renderer;
 use parallax_backend::store::{self, ImportOptions};
+use parallax_backend::volume::{MemorySource, Volume, VoxelType};
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Interpolation, RenderConfig, Shading};
 use parallax_common::tf::{ControlPoint, TransferFunction};
-use parallax_common::volume::{MemorySource, Volume, VoxelType};
 use std::path::Path;
 
 /// A constant, distinct colour per view.

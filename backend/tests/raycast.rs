@@ -9,10 +9,10 @@ use parallax_backend::raycast::{
 };
 use parallax_backend::reference::{self, Tolerance};
 use parallax_backend::store::{self, ImportOptions};
+use parallax_backend::store::{BrickEncoding, OctreeDb};
+use parallax_backend::volume::{MemorySource, Volume, VoxelType};
 use parallax_common::camera::{Placement, View};
-use parallax_common::octree::{BrickEncoding, OctreeDb};
 use parallax_common::tf::{ControlPoint, PreintTable, TransferFunction};
-use parallax_common::volume::{MemorySource, Volume, VoxelType};
 use std::collections::HashMap;
 
 fn tf() -> TransferFunction {
@@ -52,7 +52,7 @@ fn full_cut(
     db: &OctreeDb,
     float: bool,
 ) -> (
-    HashMap<parallax_common::octree::NodeKey, CutNode>,
+    HashMap<parallax_backend::store::NodeKey, CutNode>,
     BrickPool,
 ) {
     let l = *db.layout();
@@ -106,7 +106,7 @@ fn measure(
     rc: &mut Raycaster,
     s: &Setup,
     f: &TransferFunction,
-    cut: &HashMap<parallax_common::octree::NodeKey, CutNode>,
+    cut: &HashMap<parallax_backend::store::NodeKey, CutNode>,
     pool: &BrickPool,
 ) -> Measured {
     let range = (s.db.summary.value_min, s.db.summary.value_max);

@@ -3,9 +3,9 @@
 
 use glam::DVec3;
 use parallax_backend::reference::{integrate, render, Tolerance};
+use parallax_backend::volume::{Volume, VoxelType};
 use parallax_common::camera::{Placement, View};
 use parallax_common::tf::{ControlPoint, TransferFunction};
-use parallax_common::volume::{Volume, VoxelType};
 
 const TIGHT: Tolerance = Tolerance { abs: 1e-11 };
 

@@ -11,11 +11,11 @@ use parallax_backend::render::Renderer;
 use parallax_backend::simulate::{
     default_resolution, load_frame, parse_eye, sample, simulate, simulate_detailed, strip, sweep,
 };
+use parallax_backend::store::BrickEncoding;
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{
     Display, Interpolation, Observer, Projector, RenderConfig, Screen, Shading,
 };
-use parallax_common::octree::BrickEncoding;
 use parallax_common::tf::{ControlPoint, TransferFunction};
 use support::{assert_valid, import_volume, marschner_lobb, mean_alpha};
 

@@ -7,12 +7,12 @@ mod support;
 use glam::DVec3;
 use parallax_backend::reference::{self, Tolerance};
 use parallax_backend::render::Renderer;
+use parallax_backend::store::BrickEncoding;
+use parallax_backend::volume::{Volume, VoxelType};
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Mode, RenderConfig, Shading};
-use parallax_common::octree::BrickEncoding;
 use parallax_common::tf::{ControlPoint, TransferFunction};
 use parallax_common::tools::{ClipPlane, Tool};
-use parallax_common::volume::{Volume, VoxelType};
 use std::path::Path;
 use support::{assert_valid, exact_config, import_volume, marschner_lobb, mean_alpha, translucent};
 

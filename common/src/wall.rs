@@ -126,7 +126,7 @@ impl WallSpec {
             "[observer]\nposition = [{}, {}, {}]\nprojectors = \"projectors/\"",
             self.observer[0], self.observer[1], self.observer[2]
         );
-        std::fs::write(dir.join("display.toml"), d)?;
+        crate::atomic::write(&dir.join("display.toml"), d.as_bytes())?;
         let width = self.projectors.to_string().len().max(2);
         for (k, e) in self.positions().iter().enumerate() {
             let id = format!("p{k:0width$}");
@@ -134,7 +134,7 @@ impl WallSpec {
                 "id = \"{id}\"\nposition = [{:.6}, {:.6}, {:.6}]\nresolution = [{}, {}]\n",
                 e[0], e[1], e[2], self.resolution[0], self.resolution[1]
             );
-            std::fs::write(pdir.join(format!("{id}.toml")), text)?;
+            crate::atomic::write(&pdir.join(format!("{id}.toml")), text.as_bytes())?;
         }
         Ok(())
     }

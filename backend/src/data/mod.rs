@@ -16,8 +16,8 @@ pub mod synth;
 
 use std::path::Path;
 
+use crate::volume::{VolumeInfo, VolumeSource, VoxelType};
 use anyhow::{bail, Result};
-use parallax_common::volume::{VolumeInfo, VolumeSource, VoxelType};
 
 pub use self::nrrd::NrrdWriter;
 pub use self::raw::RawSource;

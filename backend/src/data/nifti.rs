@@ -11,10 +11,10 @@ use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::Path;
 
+use crate::volume::{VolumeInfo, VoxelType};
 use anyhow::{bail, ensure, Context, Result};
 use flate2::bufread::MultiGzDecoder;
 use nifti::{Endianness, NiftiHeader};
-use parallax_common::volume::{VolumeInfo, VoxelType};
 
 use super::check_info;
 use super::raw::{check_file_size, skip_bytes, RawSource, READ_BUFFER};
@@ -183,7 +183,7 @@ pub fn open_nifti(path: &Path) -> Result<RawSource> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use parallax_common::volume::{Volume, VolumeSource};
+    use crate::volume::{Volume, VolumeSource};
     use std::io::Write;
 
     /// A minimal NIfTI-1 header (native little endian, or big endian).

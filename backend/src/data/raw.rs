@@ -10,9 +10,9 @@ use std::fs::File;
 use std::io::{self, BufReader, Read};
 use std::path::Path;
 
+use crate::volume::{VolumeInfo, VolumeSource, VoxelType};
 use anyhow::{bail, ensure, Context, Result};
 use flate2::bufread::MultiGzDecoder;
-use parallax_common::volume::{VolumeInfo, VolumeSource, VoxelType};
 
 use super::{check_finite, check_info, decode_samples, shape_text, RawParams};
 
@@ -310,7 +310,7 @@ pub(crate) fn skip_bytes(r: &mut impl Read, n: u64) -> io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use parallax_common::volume::Volume;
+    use crate::volume::Volume;
     use std::io::Write;
 
     fn params(dims: [usize; 3], t: VoxelType, big: bool) -> RawParams {

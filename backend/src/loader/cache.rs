@@ -2,7 +2,7 @@
 //! (LRU, fixed byte budget) and the GPU brick pool (a fixed number of slots,
 //! LRU, with the slots of the current cut pinned).
 
-use parallax_common::octree::NodeKey;
+use crate::store::NodeKey;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 

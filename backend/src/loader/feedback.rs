@@ -12,7 +12,7 @@
 //! brick and oscillating. Nodes not in the last index count as visible.
 
 use crate::index::SpatialIndex;
-use parallax_common::octree::NodeKey;
+use crate::store::NodeKey;
 use std::collections::HashSet;
 
 #[derive(Debug, Default)]

@@ -2,9 +2,9 @@
 //! projected voxel size per view (G08 §4, L12 §4.2 "the projected size of a
 //! voxel"), and the view-frustum test (G08 §4, L12 §4.2).
 
+use crate::store::{NodeKey, OctreeLayout};
 use glam::DVec3;
 use parallax_common::camera::{Placement, View};
-use parallax_common::octree::{NodeKey, OctreeLayout};
 
 /// Observer closer than this (metres) to a node's box counts as inside it:
 /// the node's voxels project to an unbounded number of pixels.

@@ -8,7 +8,7 @@
 //! at a time and sends the result back on a channel, which the loader drains
 //! without blocking at the start of the next frame.
 
-use parallax_common::octree::{NodeKey, OctreeDb};
+use crate::store::{NodeKey, OctreeDb};
 use std::collections::VecDeque;
 use std::sync::mpsc::{self, Receiver, RecvError, Sender, TryRecvError};
 use std::sync::{Arc, Condvar, Mutex};

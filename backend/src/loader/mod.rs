@@ -31,13 +31,13 @@ mod io;
 mod ranges;
 
 use crate::index::{CutNode, SpatialIndex, MAX_INDEX_NODES, NO_SLOT};
+use crate::store::{NodeKey, OctreeDb};
 use cache::{ByteLru, SlotPool};
 use feedback::Visibility;
 pub use geometry::LightField;
 use geometry::{FrameGeometry, Geometry};
 use io::{IoPool, Landed};
 use parallax_common::camera::{Placement, View};
-use parallax_common::octree::{NodeKey, OctreeDb};
 use parallax_common::protocol::HeldBack;
 use ranges::SubtreeRanges;
 use serde::Serialize;
@@ -659,7 +659,7 @@ fn candidate(frame: &FrameGeometry, key: NodeKey) -> Candidate {
 mod tests {
     use super::*;
     use crate::store::{self, ImportOptions};
-    use parallax_common::volume::{MemorySource, Volume, VoxelType};
+    use crate::volume::{MemorySource, Volume, VoxelType};
 
     /// The state a CPU cache smaller than the pool and a camera that moved
     /// away and back leave behind: the pool is full; seven children of the

@@ -10,7 +10,7 @@
 //! L12 §4.2) on the union of the ranges of the *stored* bricks of its
 //! subtree, and on nothing when that subtree stores no brick at all.
 
-use parallax_common::octree::{NodeKey, OctreeDb, OctreeLayout};
+use crate::store::{NodeKey, OctreeDb, OctreeLayout};
 
 /// One `[min, max]` per node of the layout (8 bytes a node, about 1/1000 of
 /// the data with 32³ bricks); `min > max` for a subtree with no stored brick.

@@ -8,9 +8,9 @@ pub mod shader;
 
 use crate::gpu::Gpu;
 use crate::index::SpatialIndex;
+use crate::store::OctreeLayout;
 use anyhow::{bail, Result};
 use parallax_common::camera::{Placement, View, MAX_FRAME_PIXELS, MAX_VIEW_SIDE};
-use parallax_common::octree::OctreeLayout;
 use parallax_common::tf::{Channel, PreintLayout, PreintTable};
 use parallax_common::tools::MAX_ENHANCERS;
 pub use params::ToolParams;

@@ -109,7 +109,7 @@ impl BrickPool {
         let (bytes, range): (Vec<u8>, [f32; 2]) = if self.float {
             (bytemuck::cast_slice(values).to_vec(), [0.0, 1.0])
         } else {
-            let (lo, hi) = parallax_common::octree::codec::value_range(values);
+            let (lo, hi) = crate::store::codec::value_range(values);
             let span = hi - lo;
             let q = values
                 .iter()

@@ -10,12 +10,12 @@
 //! bounded by the windows: Σ_l (B+5)·nx_l·ny_l values, whatever the depth of
 //! the volume. Nothing else of the volume is held.
 
+use crate::store::codec::{self, BrickEncoding};
+use crate::store::writer::NodeStats;
+use crate::store::{Header, NodeKey, OctreeLayout, OctreeWriter, Summary, OVERLAP};
+use crate::volume::VolumeSource;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use parallax_common::octree::codec::{self, BrickEncoding};
-use parallax_common::octree::writer::NodeStats;
-use parallax_common::octree::{Header, NodeKey, OctreeLayout, OctreeWriter, Summary, OVERLAP};
-use parallax_common::volume::VolumeSource;
 use rayon::prelude::*;
 use std::collections::VecDeque;
 use std::path::Path;

@@ -1,8 +1,8 @@
 //! What `parallax info` reports about a database, and `--verify`: decode
 //! every stored brick and check it.
 
+use crate::store::OctreeDb;
 use anyhow::{bail, Result};
-use parallax_common::octree::OctreeDb;
 use rayon::prelude::*;
 use std::fmt::Write;
 
@@ -46,7 +46,7 @@ pub fn describe(db: &OctreeDb) -> String {
         o,
         "bricks:        {}³ (+{} overlap), encoding {}, empty below {}",
         l.brick,
-        parallax_common::octree::OVERLAP,
+        crate::store::OVERLAP,
         h.encoding.name(),
         h.empty_below
             .map(|t| t.to_string())
@@ -94,7 +94,7 @@ pub fn verify(db: &OctreeDb) -> Result<VerifyReport> {
         .filter_map(|n| match db.read_brick(n.key) {
             Err(e) => Some(format!("{e:#}")),
             Ok(Some(v)) => {
-                let (lo, hi) = parallax_common::octree::codec::value_range(&v);
+                let (lo, hi) = crate::store::codec::value_range(&v);
                 let slack = (n.max - n.min).abs() * 1e-6 + f32::EPSILON * n.max.abs().max(1.0);
                 (lo < n.min - slack || hi > n.max + slack).then(|| {
                     format!(

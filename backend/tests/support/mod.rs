@@ -2,11 +2,11 @@
 #![allow(dead_code)]
 
 use parallax_backend::data::synth::{synth_value, SynthKind};
+use parallax_backend::store::BrickEncoding;
 use parallax_backend::store::{self, ImportOptions};
+use parallax_backend::volume::{MemorySource, Volume, VoxelType};
 use parallax_common::config::{Interpolation, RenderConfig, Shading};
-use parallax_common::octree::BrickEncoding;
 use parallax_common::tf::{ControlPoint, TransferFunction};
-use parallax_common::volume::{MemorySource, Volume, VoxelType};
 use std::path::Path;
 
 /// An n³ procedural volume, 8 bit, 1 mm voxels.

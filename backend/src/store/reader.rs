@@ -231,9 +231,9 @@ fn check_header(h: &Header) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::octree::format::{Footer, Trailer};
-    use crate::octree::writer::NodeStats;
-    use crate::octree::OctreeWriter;
+    use crate::store::format::{Footer, Trailer};
+    use crate::store::writer::NodeStats;
+    use crate::store::OctreeWriter;
     use crate::volume::{VolumeInfo, VoxelType};
 
     /// An 8³ volume in bricks of 4: the root and its eight children, all

@@ -1,19 +1,17 @@
-//! Crash-safe writing of a `.pxo`: everything goes to a temporary file next to
-//! the destination, which is renamed into place only once the trailer and
-//! footer are written and synced. An interrupted import leaves whatever was at
-//! the destination untouched.
+//! Crash-safe writing of a `.pxo`: everything goes through [`AtomicFile`] (a
+//! temporary file next to the destination) and is renamed into place only once
+//! the trailer and footer are written and synced. An interrupted import leaves
+//! whatever was at the destination untouched.
 
 use super::format::{bincode_config, Footer, Header, NodeRecord, Summary, Trailer, MAGIC, VERSION};
 use super::layout::NodeKey;
 use anyhow::{Context, Result};
-use std::fs::File;
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use parallax_common::atomic::AtomicFile;
+use std::io::Write;
+use std::path::Path;
 
 pub struct OctreeWriter {
-    path: PathBuf,
-    tmp: PathBuf,
-    out: Option<BufWriter<File>>,
+    out: AtomicFile,
     offset: u64,
     nodes: Vec<NodeRecord>,
 }
@@ -29,15 +27,7 @@ pub struct NodeStats {
 
 impl OctreeWriter {
     pub fn create(path: &Path, header: &Header) -> Result<Self> {
-        let file_name = path
-            .file_name()
-            .with_context(|| format!("{}: not a file path", path.display()))?;
-        let mut tmp_name = file_name.to_os_string();
-        tmp_name.push(format!(".tmp.{}", std::process::id()));
-        let tmp = path.with_file_name(tmp_name);
-        let file =
-            File::create(&tmp).with_context(|| format!("{}: cannot create", tmp.display()))?;
-        let mut out = BufWriter::with_capacity(1 << 20, file);
+        let mut out = AtomicFile::create(path)?;
         let head = bincode::serde::encode_to_vec(header, bincode_config())?;
         out.write_all(&MAGIC)?;
         out.write_all(&VERSION.to_le_bytes())?;
@@ -46,9 +36,7 @@ impl OctreeWriter {
         out.write_all(&head)?;
         let offset = (super::format::PREAMBLE_LEN + head.len()) as u64;
         Ok(OctreeWriter {
-            path: path.to_path_buf(),
-            tmp,
-            out: Some(out),
+            out,
             offset,
             nodes: Vec::new(),
         })
@@ -69,9 +57,9 @@ impl OctreeWriter {
         };
         if let Some(bytes) = stored {
             anyhow::ensure!(!bytes.is_empty(), "brick {key}: empty encoding");
-            let out = self.out.as_mut().expect("writer already finished");
-            out.write_all(bytes)
-                .with_context(|| format!("{}: write failed", self.tmp.display()))?;
+            self.out
+                .write_all(bytes)
+                .with_context(|| format!("{}: write failed", self.out.temp_path().display()))?;
             rec.offset = self.offset;
             rec.len = u32::try_from(bytes.len())?;
             rec.crc = crc32fast::hash(bytes);
@@ -96,30 +84,12 @@ impl OctreeWriter {
             trailer_len: trailer.len() as u64,
             trailer_crc: crc32fast::hash(&trailer),
         };
-        let mut out = self.out.take().expect("writer already finished");
-        out.write_all(&trailer)?;
-        out.write_all(&footer.to_bytes())?;
-        let file = out
-            .into_inner()
-            .map_err(|e| anyhow::anyhow!("{}: write failed: {}", self.tmp.display(), e.error()))?;
-        file.sync_all()
-            .with_context(|| format!("{}: sync failed", self.tmp.display()))?;
-        drop(file);
-        std::fs::rename(&self.tmp, &self.path).with_context(|| {
-            format!(
-                "cannot rename {} to {}",
-                self.tmp.display(),
-                self.path.display()
-            )
-        })?;
+        let mut out = self.out;
+        let label = out.path().display().to_string();
+        out.write_all(&trailer)
+            .and_then(|_| out.write_all(&footer.to_bytes()))
+            .with_context(|| format!("{label}: write failed"))?;
+        out.commit()?;
         Ok(self.offset + trailer.len() as u64 + super::format::FOOTER_LEN as u64)
-    }
-}
-
-impl Drop for OctreeWriter {
-    fn drop(&mut self) {
-        if self.out.take().is_some() {
-            let _ = std::fs::remove_file(&self.tmp);
-        }
     }
 }

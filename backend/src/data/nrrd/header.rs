@@ -1,0 +1,356 @@
+//! The NRRD header: fields, their checks, attached and detached files.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, ensure, Context, Result};
+
+use crate::data::check_info;
+use crate::data::raw::READ_BUFFER;
+use crate::volume::{VolumeInfo, VoxelType};
+
+/// Longest header accepted: protects against reading a large binary file
+/// line by line when it is not a NRRD at all.
+const MAX_HEADER_BYTES: u64 = 1 << 20;
+
+/// Data encodings the reader can stream.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NrrdEncoding {
+    Raw,
+    Gzip,
+    /// Values written as text, separated by white space.
+    Ascii,
+}
+
+/// What a NRRD header says about a 3-D scalar volume.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NrrdHeader {
+    /// Dimensions and spacing (a size-1 axis of a 4-D header is dropped).
+    pub info: VolumeInfo,
+    pub encoding: NrrdEncoding,
+    pub big_endian: bool,
+    /// Detached data file, resolved relative to the header's folder; `None`
+    /// when the data follows the header in the same file.
+    pub data_file: Option<PathBuf>,
+    /// Lines of the data file to skip before `byte_skip`.
+    pub line_skip: u64,
+    /// Bytes to skip before the data (of the decompressed stream for gzip);
+    /// −1 (raw only) means the data is the last bytes of the file.
+    pub byte_skip: i64,
+}
+
+/// NRRD `type` names of the supported sample types (every spelling teem
+/// accepts), and the known ones that are not supported.
+fn parse_type(label: &str, value: &str) -> Result<VoxelType> {
+    Ok(match value {
+        "uchar" | "unsigned char" | "uint8" | "uint8_t" => VoxelType::U8,
+        "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => {
+            VoxelType::U16
+        }
+        "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => {
+            VoxelType::I16
+        }
+        "float" => VoxelType::F32,
+        "signed char" | "int8" | "int8_t" => VoxelType::I8,
+        "int" | "signed int" | "int32" | "int32_t" => VoxelType::I32,
+        "uint" | "unsigned int" | "uint32" | "uint32_t" => VoxelType::U32,
+        "double" => VoxelType::F64,
+        "longlong"
+        | "long long"
+        | "long long int"
+        | "signed long long"
+        | "signed long long int"
+        | "int64"
+        | "int64_t"
+        | "ulonglong"
+        | "unsigned long long"
+        | "unsigned long long int"
+        | "uint64"
+        | "uint64_t"
+        | "block" => {
+            bail!("{label}: type '{value}' is not supported (use int8, uint8, int16, uint16, int32, uint32, float or double)")
+        }
+        _ => bail!("{label}: type '{value}' is not a NRRD type"),
+    })
+}
+
+fn parse_encoding(label: &str, value: &str) -> Result<NrrdEncoding> {
+    Ok(match value {
+        "raw" => NrrdEncoding::Raw,
+        "gzip" | "gz" => NrrdEncoding::Gzip,
+        "ascii" | "text" | "txt" => NrrdEncoding::Ascii,
+        "hex" | "bzip2" | "bz2" => {
+            bail!("{label}: encoding '{value}' is not supported (use raw, gzip or ascii)")
+        }
+        _ => bail!("{label}: encoding '{value}' is not a NRRD encoding (use raw, gzip or ascii)"),
+    })
+}
+
+/// Parses `space directions`: one `(x,y,z)` vector or `none` per axis.
+/// Returns the vector norms (`None` for `none`).
+fn parse_space_directions(label: &str, value: &str) -> Result<Vec<Option<f64>>> {
+    let mut out = Vec::new();
+    let mut rest = value.trim();
+    while !rest.is_empty() {
+        if let Some(after) = rest.strip_prefix('(') {
+            let Some(end) = after.find(')') else {
+                bail!("{label}: space directions: missing ')' in '{value}'");
+            };
+            let mut sq = 0.0f64;
+            for c in after[..end].split(',') {
+                let x: f64 = c.trim().parse().map_err(|_| {
+                    anyhow::anyhow!("{label}: space directions: '{}' is not a number", c.trim())
+                })?;
+                sq += x * x;
+            }
+            out.push(Some(sq.sqrt()));
+            rest = after[end + 1..].trim_start();
+        } else {
+            let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
+            let word = &rest[..end];
+            if word != "none" {
+                bail!("{label}: space directions: expected '(x,y,z)' or 'none', found '{word}'");
+            }
+            out.push(None);
+            rest = rest[end..].trim_start();
+        }
+    }
+    Ok(out)
+}
+
+/// Reads one header line (without its line ending) into `line`; returns
+/// false at the end of the file.
+fn read_line(
+    r: &mut impl BufRead,
+    line: &mut Vec<u8>,
+    consumed: &mut u64,
+    label: &str,
+) -> Result<bool> {
+    line.clear();
+    let n = r
+        .by_ref()
+        .take(MAX_HEADER_BYTES)
+        .read_until(b'\n', line)
+        .with_context(|| format!("{label}: reading the header"))?;
+    *consumed += n as u64;
+    ensure!(
+        *consumed < MAX_HEADER_BYTES,
+        "{label}: header longer than {MAX_HEADER_BYTES} bytes (is this a NRRD file?)"
+    );
+    if n == 0 {
+        return Ok(false);
+    }
+    while matches!(line.last(), Some(b'\n' | b'\r')) {
+        line.pop();
+    }
+    Ok(true)
+}
+
+/// Parses the header of `path` and returns it with the file positioned just
+/// after the header (where attached data begins) and the header's length.
+pub fn read_header(path: &Path) -> Result<(NrrdHeader, BufReader<File>, u64)> {
+    let label = path.display().to_string();
+    let file = File::open(path).with_context(|| format!("{label}: cannot open"))?;
+    let mut r = BufReader::with_capacity(READ_BUFFER, file);
+    let mut consumed = 0u64;
+    let mut line = Vec::new();
+
+    read_line(&mut r, &mut line, &mut consumed, &label)?;
+    let magic_ok = line.len() == 8 && line.starts_with(b"NRRD000") && line[7].is_ascii_digit();
+    ensure!(
+        magic_ok,
+        "{label}: not a NRRD file (the first line must be NRRD000X)"
+    );
+
+    let mut dimension = None;
+    let mut sizes = None;
+    let mut type_ = None;
+    let mut encoding = None;
+    let mut endian = None;
+    let mut spacings = None;
+    let mut directions = None;
+    let mut data_file = None;
+    let mut byte_skip = None;
+    let mut line_skip = None;
+    let mut ended_by_blank_line = false;
+    while read_line(&mut r, &mut line, &mut consumed, &label)? {
+        if line.is_empty() {
+            ended_by_blank_line = true;
+            break;
+        }
+        let text = String::from_utf8_lossy(&line);
+        if text.starts_with('#') {
+            continue;
+        }
+        // "field: value", or "key:=value" (free-form metadata, ignored).
+        let field_sep = text.find(": ").or_else(|| text.find(':'));
+        let Some(f) = field_sep else {
+            bail!("{label}: header line '{text}' is not 'field: value'");
+        };
+        if text[f..].starts_with(":=") || text.find(":=").is_some_and(|kv| kv < f) {
+            continue;
+        }
+        let (field, value) = (&text[..f], text[f + 1..].trim());
+        let value = value.to_string();
+        match field.trim().to_ascii_lowercase().as_str() {
+            "dimension" => dimension = Some(value),
+            "sizes" => sizes = Some(value),
+            "type" => type_ = Some(value),
+            "encoding" => encoding = Some(value),
+            "endian" => endian = Some(value),
+            "spacings" => spacings = Some(value),
+            "space directions" => directions = Some(value),
+            "data file" | "datafile" => data_file = Some(value),
+            "byte skip" | "byteskip" => byte_skip = Some(value),
+            "line skip" | "lineskip" => line_skip = Some(value),
+            _ => {} // content, kinds, space, space origin, units, …: not needed here
+        }
+    }
+
+    let missing = |f: &str| anyhow::anyhow!("{label}: missing field '{f}'");
+    let dimension = dimension.ok_or_else(|| missing("dimension"))?;
+    let dimension: usize = dimension
+        .parse()
+        .map_err(|_| anyhow::anyhow!("{label}: dimension: '{dimension}' is not a number"))?;
+    let sizes_text = sizes.ok_or_else(|| missing("sizes"))?;
+    let mut sizes = Vec::new();
+    for s in sizes_text.split_whitespace() {
+        sizes.push(
+            s.parse::<usize>()
+                .map_err(|_| anyhow::anyhow!("{label}: sizes: '{s}' is not a size"))?,
+        );
+    }
+    ensure!(
+        sizes.len() == dimension,
+        "{label}: sizes: {} sizes for dimension {dimension}",
+        sizes.len()
+    );
+    // Axes to keep: a 4-D header with a size-1 axis is a 3-D volume (the
+    // dropped axis does not change the memory layout).
+    let keep: Vec<usize> = match dimension {
+        3 => vec![0, 1, 2],
+        4 => match sizes.iter().position(|&s| s == 1) {
+            Some(drop) => (0..4).filter(|&a| a != drop).collect(),
+            None => bail!(
+                "{label}: dimension: 4 with sizes {sizes_text} is not a scalar volume \
+                 (need 3 dimensions, or 4 with an axis of size 1)"
+            ),
+        },
+        d => bail!("{label}: dimension: {d} is not supported (need a 3-dimensional volume)"),
+    };
+    let dims = [sizes[keep[0]], sizes[keep[1]], sizes[keep[2]]];
+
+    let voxel_type = parse_type(&label, &type_.ok_or_else(|| missing("type"))?)?;
+    let encoding = parse_encoding(&label, &encoding.ok_or_else(|| missing("encoding"))?)?;
+    let big_endian = match endian.as_deref() {
+        Some("little") => false,
+        Some("big") => true,
+        Some(e) => bail!("{label}: endian: '{e}' is not 'little' or 'big'"),
+        None if voxel_type.bytes() == 1 || encoding == NrrdEncoding::Ascii => false,
+        None => bail!(
+            "{label}: missing field 'endian' (required for type {})",
+            voxel_type.name()
+        ),
+    };
+
+    let (spacing, spacing_field) = if let Some(d) = directions {
+        let norms = parse_space_directions(&label, &d)?;
+        ensure!(
+            norms.len() == dimension,
+            "{label}: space directions: {} entries for dimension {dimension}",
+            norms.len()
+        );
+        let mut s = [0.0; 3];
+        for (a, &axis) in keep.iter().enumerate() {
+            s[a] = norms[axis].ok_or_else(|| {
+                anyhow::anyhow!("{label}: space directions: axis {axis} is 'none' but holds voxels")
+            })?;
+        }
+        (s, "space directions")
+    } else if let Some(sp) = spacings {
+        let mut values = Vec::new();
+        for t in sp.split_whitespace() {
+            values.push(
+                t.parse::<f64>()
+                    .map_err(|_| anyhow::anyhow!("{label}: spacings: '{t}' is not a number"))?,
+            );
+        }
+        ensure!(
+            values.len() == dimension,
+            "{label}: spacings: {} values for dimension {dimension}",
+            values.len()
+        );
+        (
+            [values[keep[0]], values[keep[1]], values[keep[2]]],
+            "spacings",
+        )
+    } else {
+        ([1.0; 3], "spacings") // no spacing given: unit voxels
+    };
+
+    let info = VolumeInfo {
+        dims,
+        spacing,
+        voxel_type,
+    };
+    check_info(&label, &info, "sizes", spacing_field)?;
+
+    let byte_skip = match byte_skip {
+        None => 0,
+        Some(b) => {
+            let v: i64 = b
+                .parse()
+                .map_err(|_| anyhow::anyhow!("{label}: byte skip: '{b}' is not a number"))?;
+            ensure!(v >= -1, "{label}: byte skip: {v} is negative");
+            ensure!(
+                v != -1 || encoding == NrrdEncoding::Raw,
+                "{label}: byte skip: -1 is only allowed with raw encoding"
+            );
+            v
+        }
+    };
+    let line_skip = match line_skip {
+        None => 0,
+        Some(l) => l
+            .parse::<u64>()
+            .map_err(|_| anyhow::anyhow!("{label}: line skip: '{l}' is not a number"))?,
+    };
+
+    let data_file = match data_file {
+        None => {
+            ensure!(
+                ended_by_blank_line,
+                "{label}: no data after the header (attached data must follow a blank line)"
+            );
+            None
+        }
+        Some(f) => {
+            let multi =
+                f.starts_with("LIST") || (f.contains('%') && f.split_whitespace().count() > 1);
+            ensure!(
+                !multi,
+                "{label}: data file: '{f}' names several files, which is not supported"
+            );
+            let p = Path::new(&f);
+            Some(if p.is_absolute() {
+                p.to_path_buf()
+            } else {
+                path.parent().unwrap_or(Path::new("")).join(p)
+            })
+        }
+    };
+
+    Ok((
+        NrrdHeader {
+            info,
+            encoding,
+            big_endian,
+            data_file,
+            line_skip,
+            byte_skip,
+        },
+        r,
+        consumed,
+    ))
+}
