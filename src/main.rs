@@ -3,6 +3,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use parallax_backend::data::{self, synth::SynthKind, RawParams};
+use parallax_backend::store::codec::Codec;
 use parallax_backend::store::{self, info, ImportOptions};
 use parallax_backend::store::{BrickEncoding, OctreeDb};
 use parallax_backend::volume::VoxelType;
@@ -24,11 +25,12 @@ struct Cli {
 enum Command {
     /// Write a procedural volume as NRRD (streamed: any size fits in memory).
     Synth {
-        /// marschner-lobb | shells | shepp-logan | constant | plane | noise | stiff
+        /// marschner-lobb | shells | shepp-logan | constant | plane | noise | stiff | ct
+        /// (ct: a head in Hounsfield units with scanner noise; use --type i16)
         kind: String,
         #[arg(long)]
         size: usize,
-        /// u8 | u16 | f32
+        /// u8 | i8 | u16 | i16 | u32 | i32 | f32 | f64
         #[arg(long = "type", default_value = "u8")]
         voxel_type: String,
         #[arg(short, long)]
@@ -49,6 +51,11 @@ enum Command {
         /// u8 | u16 (quantised against each brick's range) | none (full precision)
         #[arg(long, default_value = "u8")]
         quantize: String,
+        /// Brick compression: lz4 | zstd | zstdN (level 1–19), each optionally
+        /// +delta (a delta pre-filter) or +auto (per brick, the smaller of
+        /// the two).
+        #[arg(long, default_value = "zstd1+auto", value_parser = parse_codec)]
+        codec: Codec,
         /// Memory budget of the import (MiB).
         #[arg(long, default_value_t = 2048)]
         memory_mb: usize,
@@ -123,6 +130,13 @@ enum Command {
         /// refraction): DIR/kernels.csv.
         #[arg(long)]
         kernels_only: bool,
+        /// Only the brick codecs, on these volumes: ratio, encode and decode
+        /// speed of each candidate (DIR/codecs.csv).
+        #[arg(long, value_delimiter = ',', num_args = 1..)]
+        codecs: Vec<PathBuf>,
+        /// Quantisation of the bricks for --codecs: u8 | u16 | none.
+        #[arg(long, default_value = "u8")]
+        quantize: String,
     },
     /// Write a HoloVizio-like light field wall: DIR/display.toml and one
     /// file per projector (defaults: the 72-projector wall of G10 §6).
@@ -229,7 +243,7 @@ fn run(cli: Cli) -> Result<()> {
             output,
         } => {
             let kind = SynthKind::parse(&kind).with_context(|| {
-                format!("synth: unknown kind '{kind}' (marschner-lobb, shells, shepp-logan, constant, plane, noise, stiff)")
+                format!("synth: unknown kind '{kind}' (marschner-lobb, shells, shepp-logan, constant, plane, noise, stiff, ct)")
             })?;
             let vt = parse_type(&voxel_type, "--type")?;
             if size == 0 {
@@ -246,6 +260,7 @@ fn run(cli: Cli) -> Result<()> {
             brick,
             empty_below,
             quantize,
+            codec,
             memory_mb,
             dims,
             voxel_type,
@@ -273,6 +288,7 @@ fn run(cli: Cli) -> Result<()> {
             let opts = ImportOptions {
                 brick,
                 encoding,
+                codec,
                 empty_below,
                 memory_mb,
                 progress: std::io::stderr().is_terminal(),
@@ -348,7 +364,31 @@ fn run(cli: Cli) -> Result<()> {
             repeats,
             out,
             kernels_only,
+            codecs,
+            quantize,
         } => {
+            if !codecs.is_empty() {
+                let encoding = BrickEncoding::parse(&quantize).with_context(|| {
+                    format!("--quantize '{quantize}': expected u8, u16 or none")
+                })?;
+                let points = parallax_backend::bench::run_codecs(&codecs, encoding, &out)?;
+                println!(
+                    "volume                 codec         ratio  encode MB/s  decode MB/s (in)"
+                );
+                for p in points {
+                    println!(
+                        "{:<22} {:<12} {:>6.2}  {:>11.0}  {:>11.0} ({:.0})",
+                        p.volume,
+                        p.codec,
+                        p.source_bytes as f64 / p.stored_bytes as f64,
+                        p.encode_mb_s,
+                        p.decode_mb_s,
+                        p.decode_in_mb_s
+                    );
+                }
+                println!("wrote {}/codecs.csv", out.display());
+                return Ok(());
+            }
             let (w, h) = size
                 .split_once('x')
                 .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
@@ -698,4 +738,12 @@ fn peak_rss_kib() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     line.split_whitespace().nth(1)?.parse().ok()
+}
+
+fn parse_codec(s: &str) -> std::result::Result<Codec, String> {
+    Codec::parse(s).ok_or_else(|| {
+        format!(
+            "'{s}': expected lz4, zstd or zstdN (N = 1–19), optionally followed by +delta or +auto"
+        )
+    })
 }

@@ -35,6 +35,9 @@ impl AtomicFile {
         let tmp = tempfile::Builder::new()
             .prefix(&prefix)
             .suffix(".tmp")
+            // What a plain create would give (the umask applies), not
+            // tempfile's private 0600.
+            .permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666))
             .tempfile_in(dir)
             .with_context(|| {
                 format!(
@@ -125,6 +128,13 @@ mod tests {
         f.write_all(b"new").unwrap();
         f.commit().unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"new");
+        let mode = |p: &Path| {
+            std::os::unix::fs::PermissionsExt::mode(&std::fs::metadata(p).unwrap().permissions())
+        };
+        let plain = dir.path().join("plain");
+        File::create(&plain).unwrap();
+        assert_eq!(mode(&p), mode(&plain), "the mode a plain create gives");
+        std::fs::remove_file(&plain).unwrap();
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 

@@ -31,10 +31,11 @@ pub enum SynthKind {
     Plane,
     Noise,
     Stiff,
+    Ct,
 }
 
 impl SynthKind {
-    pub const ALL: [SynthKind; 7] = [
+    pub const ALL: [SynthKind; 8] = [
         SynthKind::MarschnerLobb,
         SynthKind::Shells,
         SynthKind::SheppLogan,
@@ -42,6 +43,7 @@ impl SynthKind {
         SynthKind::Plane,
         SynthKind::Noise,
         SynthKind::Stiff,
+        SynthKind::Ct,
     ];
 
     /// The command-line name.
@@ -54,6 +56,7 @@ impl SynthKind {
             SynthKind::Plane => "plane",
             SynthKind::Noise => "noise",
             SynthKind::Stiff => "stiff",
+            SynthKind::Ct => "ct",
         }
     }
 
@@ -252,6 +255,31 @@ fn noise(p: [f64; 3]) -> f64 {
     sum / total
 }
 
+/// Hounsfield units of the CT phantom's [0, 1] range ends: −1024 … 3071,
+/// the span CT scanners store.
+pub const CT_HU: (f64, f64) = (-1024.0, 3071.0);
+
+/// A CT-like head: the Shepp–Logan geometry in Hounsfield units (air −1000,
+/// skull +1000, brain 40, ventricles 20, small lesions 50) with scanner-like
+/// noise (uniform ±20 HU per voxel, deterministic), mostly air around it.
+/// Returned on [0, 1] over [`CT_HU`].
+fn ct(p: [f64; 3], i: usize, j: usize, k: usize) -> f64 {
+    let sum: f64 = SHEPP_LOGAN
+        .iter()
+        .filter(|e| inside(e, p))
+        .map(|e| e.density)
+        .sum();
+    let hu = if sum <= 0.5 {
+        -1000.0
+    } else if sum >= 1.5 {
+        1000.0
+    } else {
+        40.0 + (sum - 1.02) * 1000.0
+    };
+    let noise = (lattice(i as i64, j as i64, k as i64, 99) - 0.5) * 40.0;
+    ((hu + noise - CT_HU.0) / (CT_HU.1 - CT_HU.0)).clamp(0.0, 1.0)
+}
+
 /// Width in voxels of the stiff checkerboard's cells.
 const STIFF_CELL: usize = 4;
 
@@ -272,6 +300,7 @@ pub fn synth_value(kind: SynthKind, i: usize, j: usize, k: usize, n: usize) -> f
         }
         SynthKind::Noise => noise(p),
         SynthKind::Stiff => ((i / STIFF_CELL + j / STIFF_CELL + k / STIFF_CELL) % 2) as f64,
+        SynthKind::Ct => ct(p, i, j, k),
     }
 }
 
@@ -289,9 +318,11 @@ pub fn write_synth(
 ) -> Result<()> {
     ensure!(n > 0, "{}: --size must be at least 1", path.display());
     let mut writer = NrrdWriter::create(path, [n; 3], voxel_type, [1.0; 3])?;
-    let (lo, hi) = match voxel_type {
-        VoxelType::F32 => (0.0, 1.0),
-        t => t.limits(),
+    let (lo, hi) = match (kind, voxel_type) {
+        // The CT phantom keeps Hounsfield units where the type can hold them.
+        (SynthKind::Ct, t) if !matches!(t, VoxelType::U8 | VoxelType::U16 | VoxelType::I8) => CT_HU,
+        (_, VoxelType::F32 | VoxelType::F64) => (0.0, 1.0),
+        (_, t) => t.limits(),
     };
     let mut slice = vec![0f32; n * n];
     for k in 0..n {
@@ -310,6 +341,23 @@ pub fn write_synth(
 mod tests {
     use super::*;
     use crate::volume::Volume;
+
+    #[test]
+    fn ct_is_in_hounsfield_units_with_noise() {
+        let n = 64;
+        let hu = |i, j, k| CT_HU.0 + synth_value(SynthKind::Ct, i, j, k, n) * (CT_HU.1 - CT_HU.0);
+        let air = hu(0, 0, 0);
+        assert!((-1020.0..=-980.0).contains(&air), "{air}");
+        let brain = hu(n / 2, n / 2 + 8, n / 2);
+        assert!((10.0..=70.0).contains(&brain), "{brain}");
+        assert_ne!(hu(0, 0, 0), hu(1, 0, 0), "noise");
+        // mostly air: a CT's large empty fraction
+        let air_voxels = (0..n)
+            .flat_map(|k| (0..n).map(move |j| (j, k)))
+            .filter(|&(j, k)| hu(n / 2, j, k) < -900.0)
+            .count();
+        assert!(air_voxels * 4 > n * n, "{air_voxels}");
+    }
 
     #[test]
     fn names_round_trip() {

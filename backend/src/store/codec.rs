@@ -63,10 +63,147 @@ pub fn value_range(values: &[f32]) -> (f32, f32) {
         })
 }
 
+/// The compressor of a stored brick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Compressor {
+    Lz4,
+    /// zstd at the given level (only the encoder needs the level).
+    Zstd(i32),
+}
+
+/// The pre-filter before compression.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Filter {
+    None,
+    /// Each value minus the one before it along x (wrapping), then the bytes
+    /// of 2- and 4-byte values split into byte planes: the slow ramps of
+    /// smooth data become runs of small numbers.
+    Delta,
+    /// Per brick, whichever of the two stores smaller (the brick's tag says
+    /// which). Costs a second compression at import, nothing at decode.
+    Auto,
+}
+
+/// How a brick's quantised bytes are compressed: a compressor after a
+/// pre-filter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Codec {
+    pub compressor: Compressor,
+    pub filter: Filter,
+}
+
+/// How the stored bricks of a file are framed. Format 1 (the first release)
+/// stored every brick as LZ4 with a 4-byte size prefix; format 2 begins every
+/// brick with a one-byte codec tag, so each brick names its own codec and
+/// files that mix codecs read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Framing {
+    /// Format 1: LZ4, 4-byte size prefix, no tag.
+    Untagged,
+    /// Format 2: tag, 4-byte size, payload.
+    Tagged,
+}
+
+impl Codec {
+    pub const LZ4: Codec = Codec {
+        compressor: Compressor::Lz4,
+        filter: Filter::None,
+    };
+    /// What import writes unless told otherwise: chosen by ratio and decode
+    /// speed on Colin27, a CT and a smooth field (docs/figures.md
+    /// "Compression").
+    pub const DEFAULT: Codec = Codec {
+        compressor: Compressor::Zstd(1),
+        filter: Filter::Auto,
+    };
+
+    /// `lz4`, `zstd` (level 1) or `zstdN` (level N, 1–19), each optionally
+    /// followed by `+delta` or `+auto`.
+    pub fn parse(s: &str) -> Option<Self> {
+        let (base, filter) = if let Some(b) = s.strip_suffix("+delta") {
+            (b, Filter::Delta)
+        } else if let Some(b) = s.strip_suffix("+auto") {
+            (b, Filter::Auto)
+        } else {
+            (s, Filter::None)
+        };
+        let compressor = match base {
+            "lz4" => Compressor::Lz4,
+            "zstd" => Compressor::Zstd(1),
+            _ => {
+                let level: i32 = base.strip_prefix("zstd")?.parse().ok()?;
+                if !(1..=19).contains(&level) {
+                    return None;
+                }
+                Compressor::Zstd(level)
+            }
+        };
+        Some(Codec { compressor, filter })
+    }
+
+    pub fn name(self) -> String {
+        let base = match self.compressor {
+            Compressor::Lz4 => "lz4".to_string(),
+            Compressor::Zstd(l) => format!("zstd{l}"),
+        };
+        match self.filter {
+            Filter::None => base,
+            Filter::Delta => base + "+delta",
+            Filter::Auto => base + "+auto",
+        }
+    }
+
+    /// The tag byte of format 2: bits 0–3 the compressor, bit 4 the filter
+    /// (a resolved one: never [`Filter::Auto`]).
+    fn tag(self) -> u8 {
+        let c = match self.compressor {
+            Compressor::Lz4 => 0,
+            Compressor::Zstd(_) => 1,
+        };
+        c | if self.filter == Filter::Delta {
+            0x10
+        } else {
+            0
+        }
+    }
+
+    /// The codec a tag names (the zstd level is not recorded: decoding does
+    /// not need it).
+    pub fn from_tag(tag: u8) -> Option<Codec> {
+        let compressor = match tag & 0x0f {
+            0 => Compressor::Lz4,
+            1 => Compressor::Zstd(0),
+            _ => return None,
+        };
+        if tag & !0x1f != 0 {
+            return None;
+        }
+        Some(Codec {
+            compressor,
+            filter: if tag & 0x10 != 0 {
+                Filter::Delta
+            } else {
+                Filter::None
+            },
+        })
+    }
+}
+
 /// Quantises (if the encoding says so) and compresses a brick whose values
-/// span [min, max]. The result is what is stored on disk.
-pub fn encode(values: &[f32], min: f32, max: f32, encoding: BrickEncoding) -> Vec<u8> {
-    let raw: Vec<u8> = match encoding {
+/// span [min, max]. The result is what is stored on disk (format 2).
+pub fn encode(
+    values: &[f32],
+    min: f32,
+    max: f32,
+    encoding: BrickEncoding,
+    codec: Codec,
+) -> Vec<u8> {
+    compress(&quantise(values, min, max, encoding), encoding, codec)
+}
+
+/// A brick's values as the bytes the encoding stores (little endian).
+pub fn quantise(values: &[f32], min: f32, max: f32, encoding: BrickEncoding) -> Vec<u8> {
+    match encoding {
         BrickEncoding::F32 => bytemuck::cast_slice::<f32, u8>(values).to_vec(),
         BrickEncoding::U8Range => {
             let q = Quantiser::new(min, max, encoding);
@@ -79,8 +216,122 @@ pub fn encode(values: &[f32], min: f32, max: f32, encoding: BrickEncoding) -> Ve
                 .flat_map(|&v| (q.quantise(v) as u16).to_le_bytes())
                 .collect()
         }
+    }
+}
+
+/// Compresses quantised bytes into a format-2 record: tag, size, payload.
+pub fn compress(raw: &[u8], encoding: BrickEncoding, codec: Codec) -> Vec<u8> {
+    if codec.filter == Filter::Auto {
+        let plain = compress(
+            raw,
+            encoding,
+            Codec {
+                filter: Filter::None,
+                ..codec
+            },
+        );
+        let delta = compress(
+            raw,
+            encoding,
+            Codec {
+                filter: Filter::Delta,
+                ..codec
+            },
+        );
+        return if delta.len() < plain.len() {
+            delta
+        } else {
+            plain
+        };
+    }
+    let filtered;
+    let data = if codec.filter == Filter::Delta {
+        filtered = delta_forward(raw, bytes_per_value(encoding));
+        &filtered[..]
+    } else {
+        raw
     };
-    lz4_flex::compress_prepend_size(&raw)
+    let mut out = Vec::with_capacity(raw.len() / 2 + 16);
+    out.push(codec.tag());
+    out.extend_from_slice(&(raw.len() as u32).to_le_bytes());
+    match codec.compressor {
+        Compressor::Lz4 => out.extend_from_slice(&lz4_flex::block::compress(data)),
+        Compressor::Zstd(level) => out.extend_from_slice(
+            &zstd::bulk::compress(data, level).expect("zstd compresses any input in memory"),
+        ),
+    }
+    out
+}
+
+/// Wrapping differences of consecutive `width`-byte values, then the bytes
+/// split into planes (all first bytes, all second bytes, …).
+fn delta_forward(raw: &[u8], width: usize) -> Vec<u8> {
+    let n = raw.len() / width;
+    let mut out = vec![0u8; raw.len()];
+    match width {
+        1 => {
+            let mut prev = 0u8;
+            for (o, &v) in out.iter_mut().zip(raw) {
+                *o = v.wrapping_sub(prev);
+                prev = v;
+            }
+        }
+        2 => {
+            let (lo, hi) = out.split_at_mut(n);
+            let mut prev = 0u16;
+            for ((c, l), h) in raw.chunks_exact(2).zip(lo).zip(hi) {
+                let v = u16::from_le_bytes([c[0], c[1]]);
+                let [a, b] = v.wrapping_sub(prev).to_le_bytes();
+                (*l, *h) = (a, b);
+                prev = v;
+            }
+        }
+        _ => {
+            let mut prev = 0u32;
+            for (i, c) in raw.chunks_exact(4).enumerate() {
+                let v = u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+                let d = v.wrapping_sub(prev).to_le_bytes();
+                for (b, byte) in d.into_iter().enumerate() {
+                    out[b * n + i] = byte;
+                }
+                prev = v;
+            }
+        }
+    }
+    out
+}
+
+fn delta_inverse(planes: &[u8], width: usize) -> Vec<u8> {
+    let n = planes.len() / width;
+    let mut out = vec![0u8; planes.len()];
+    match width {
+        1 => {
+            let mut acc = 0u8;
+            for (o, &d) in out.iter_mut().zip(planes) {
+                acc = acc.wrapping_add(d);
+                *o = acc;
+            }
+        }
+        2 => {
+            let (lo, hi) = planes.split_at(n);
+            let mut acc = 0u16;
+            for ((o, &l), &h) in out.chunks_exact_mut(2).zip(lo).zip(hi) {
+                acc = acc.wrapping_add(u16::from_le_bytes([l, h]));
+                o.copy_from_slice(&acc.to_le_bytes());
+            }
+        }
+        _ => {
+            let (p0, rest) = planes.split_at(n);
+            let (p1, rest) = rest.split_at(n);
+            let (p2, p3) = rest.split_at(n);
+            let mut acc = 0u32;
+            for (i, o) in out.chunks_exact_mut(4).enumerate() {
+                acc = acc.wrapping_add(u32::from_le_bytes([p0[i], p1[i], p2[i], p3[i]]));
+                o.copy_from_slice(&acc.to_le_bytes());
+            }
+        }
+    }
+    out
 }
 
 fn bytes_per_value(encoding: BrickEncoding) -> usize {
@@ -91,10 +342,12 @@ fn bytes_per_value(encoding: BrickEncoding) -> usize {
     }
 }
 
-/// The most bytes a brick of `len` values can take on disk (LZ4's worst case
-/// plus its 4-byte size prefix): a longer record is corrupt.
+/// The most bytes a brick of `len` values can take on disk (the larger of
+/// LZ4's and zstd's worst cases plus tag and size prefix): a longer record is
+/// corrupt.
 pub fn max_encoded_len(len: usize, encoding: BrickEncoding) -> usize {
-    4 + lz4_flex::block::get_maximum_output_size(len * bytes_per_value(encoding))
+    let n = len * bytes_per_value(encoding);
+    5 + lz4_flex::block::get_maximum_output_size(n).max(zstd::zstd_safe::compress_bound(n))
 }
 
 /// Why a stored brick could not be decoded.
@@ -106,6 +359,65 @@ pub enum DecodeError {
     Decompress(String),
     #[error("decoded to {got} bytes, expected {expected}")]
     Size { got: usize, expected: usize },
+    #[error("unknown codec tag {0:#04x} (written by a newer Parallax?)")]
+    Codec(u8),
+}
+
+/// The codec a stored brick names (format 1 is always LZ4).
+pub fn stored_codec(stored: &[u8], framing: Framing) -> Result<Codec, DecodeError> {
+    match framing {
+        Framing::Untagged => Ok(Codec::LZ4),
+        Framing::Tagged => {
+            let tag = *stored
+                .first()
+                .ok_or_else(|| DecodeError::Decompress("empty record".into()))?;
+            Codec::from_tag(tag).ok_or(DecodeError::Codec(tag))
+        }
+    }
+}
+
+/// Checks a stored brick's framing and size, and decompresses it to the
+/// quantised bytes (`expected` of them).
+pub fn decompress(
+    stored: &[u8],
+    encoding: BrickEncoding,
+    expected: usize,
+    framing: Framing,
+) -> Result<Vec<u8>, DecodeError> {
+    let codec = stored_codec(stored, framing)?;
+    let body = match framing {
+        Framing::Untagged => stored,
+        Framing::Tagged => &stored[1..],
+    };
+    // The size prefix is checked before anything is allocated for it.
+    let declared = body
+        .get(..4)
+        .map(|b| u32::from_le_bytes(b.try_into().unwrap()) as usize)
+        .ok_or_else(|| DecodeError::Decompress("shorter than its size prefix".into()))?;
+    if declared != expected {
+        return Err(DecodeError::Size {
+            got: declared,
+            expected,
+        });
+    }
+    let payload = &body[4..];
+    let raw = match codec.compressor {
+        Compressor::Lz4 => lz4_flex::block::decompress(payload, expected)
+            .map_err(|e| DecodeError::Decompress(e.to_string()))?,
+        Compressor::Zstd(_) => zstd::bulk::decompress(payload, expected)
+            .map_err(|e| DecodeError::Decompress(e.to_string()))?,
+    };
+    if raw.len() != expected {
+        return Err(DecodeError::Size {
+            got: raw.len(),
+            expected,
+        });
+    }
+    Ok(if codec.filter == Filter::Delta {
+        delta_inverse(&raw, bytes_per_value(encoding))
+    } else {
+        raw
+    })
 }
 
 /// Checks a stored brick against its checksum, decompresses it and maps it
@@ -117,6 +429,7 @@ pub fn decode(
     max: f32,
     encoding: BrickEncoding,
     len: usize,
+    framing: Framing,
 ) -> Result<Vec<f32>, DecodeError> {
     let computed = crc32fast::hash(stored);
     if computed != crc {
@@ -125,28 +438,14 @@ pub fn decode(
             computed,
         });
     }
-    let bytes_per = bytes_per_value(encoding);
-    // The size prefix is checked before anything is allocated for it.
-    let declared = stored
-        .get(..4)
-        .map(|b| u32::from_le_bytes(b.try_into().unwrap()) as usize)
-        .ok_or_else(|| DecodeError::Decompress("shorter than its size prefix".into()))?;
-    if declared != len * bytes_per {
-        return Err(DecodeError::Size {
-            got: declared,
-            expected: len * bytes_per,
-        });
-    }
-    let raw = lz4_flex::decompress_size_prepended(stored)
-        .map_err(|e| DecodeError::Decompress(e.to_string()))?;
-    if raw.len() != len * bytes_per {
-        return Err(DecodeError::Size {
-            got: raw.len(),
-            expected: len * bytes_per,
-        });
-    }
+    let raw = decompress(stored, encoding, len * bytes_per_value(encoding), framing)?;
+    Ok(dequantise(&raw, min, max, encoding))
+}
+
+/// Quantised bytes back to data values.
+pub fn dequantise(raw: &[u8], min: f32, max: f32, encoding: BrickEncoding) -> Vec<f32> {
     let q = Quantiser::new(min, max, encoding);
-    Ok(match encoding {
+    match encoding {
         BrickEncoding::F32 => raw
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
@@ -156,7 +455,7 @@ pub fn decode(
             .chunks_exact(2)
             .map(|b| q.value(u16::from_le_bytes([b[0], b[1]]) as u32))
             .collect(),
-    })
+    }
 }
 
 /// The linear map between a brick's [min, max] and the integer codes
@@ -201,68 +500,193 @@ pub fn checksum(bytes: &[u8]) -> u32 {
 mod tests {
     use super::*;
 
+    const CODECS: [Codec; 5] = [
+        Codec::LZ4,
+        Codec {
+            compressor: Compressor::Lz4,
+            filter: Filter::Delta,
+        },
+        Codec {
+            compressor: Compressor::Zstd(3),
+            filter: Filter::None,
+        },
+        Codec {
+            compressor: Compressor::Zstd(1),
+            filter: Filter::Delta,
+        },
+        Codec::DEFAULT,
+    ];
+    const ENCODINGS: [BrickEncoding; 3] = [
+        BrickEncoding::U8Range,
+        BrickEncoding::U16Range,
+        BrickEncoding::F32,
+    ];
+
     fn ramp() -> Vec<f32> {
         (0..1000).map(|i| -1024.0 + (i as f32) * 3.7).collect()
     }
 
     #[test]
-    fn round_trips_within_the_quantisation_bound() {
+    fn round_trips_within_the_quantisation_bound_with_every_codec() {
         let v = ramp();
         let (lo, hi) = value_range(&v);
-        for enc in [
-            BrickEncoding::U8Range,
-            BrickEncoding::U16Range,
-            BrickEncoding::F32,
-        ] {
-            let s = encode(&v, lo, hi, enc);
-            let d = decode(&s, crc32fast::hash(&s), lo, hi, enc, v.len()).unwrap();
-            let bound = enc.error_bound(lo, hi);
-            let worst = v
-                .iter()
-                .zip(&d)
-                .map(|(a, b)| (*a as f64 - *b as f64).abs())
-                .fold(0.0, f64::max);
-            // f32 rounding of the decoded value adds at most half an ulp of
-            // the largest magnitude (2^-24 · 4096 here).
-            assert!(worst <= bound + 1e-3, "{enc:?}: {worst} > {bound}");
-            if enc == BrickEncoding::F32 {
-                assert_eq!(worst, 0.0);
+        for enc in ENCODINGS {
+            let exact = quantise(&v, lo, hi, enc);
+            for codec in CODECS {
+                let s = encode(&v, lo, hi, enc, codec);
+                if codec.filter != Filter::Auto {
+                    assert_eq!(
+                        stored_codec(&s, Framing::Tagged).unwrap().tag(),
+                        codec.tag()
+                    );
+                }
+                let raw = decompress(&s, enc, exact.len(), Framing::Tagged).unwrap();
+                assert_eq!(raw, exact, "{enc:?} {}: lossless", codec.name());
+                let d = decode(&s, checksum(&s), lo, hi, enc, v.len(), Framing::Tagged).unwrap();
+                let bound = enc.error_bound(lo, hi);
+                let worst = v
+                    .iter()
+                    .zip(&d)
+                    .map(|(a, b)| (*a as f64 - *b as f64).abs())
+                    .fold(0.0, f64::max);
+                // f32 rounding of the decoded value adds at most half an ulp
+                // of the largest magnitude (2^-24 · 4096 here).
+                assert!(worst <= bound + 1e-3, "{enc:?}: {worst} > {bound}");
+                if enc == BrickEncoding::F32 {
+                    assert_eq!(worst, 0.0);
+                }
             }
         }
     }
 
     #[test]
-    fn constant_brick_decodes_exactly() {
-        let v = vec![42.5f32; 64];
-        let s = encode(&v, 42.5, 42.5, BrickEncoding::U8Range);
+    fn delta_filter_inverts_on_extremes_and_helps_ramps() {
+        for width in [1usize, 2, 4] {
+            let raw: Vec<u8> = (0..width * 300).map(|i| (i * 7919 % 256) as u8).collect();
+            assert_eq!(delta_inverse(&delta_forward(&raw, width), width), raw);
+            let ramp: Vec<u8> = (0..3000u32)
+                .flat_map(|i| (i * 13).to_le_bytes()[..width].to_vec())
+                .collect();
+            let d = delta_forward(&ramp, width);
+            assert_eq!(delta_inverse(&d, width), ramp);
+            let plain = compress(&ramp, enc_of(width), CODECS[2]).len();
+            let filtered = compress(&ramp, enc_of(width), CODECS[3]).len();
+            assert!(filtered < plain, "width {width}: {filtered} ≥ {plain}");
+            // Auto keeps the smaller of the two, brick by brick.
+            let auto = compress(&ramp, enc_of(width), Codec::DEFAULT);
+            assert_eq!(auto.len(), filtered);
+            assert_eq!(
+                stored_codec(&auto, Framing::Tagged).unwrap().filter,
+                Filter::Delta
+            );
+            let noise: Vec<u8> = (0..3000u64)
+                .map(|i| (i.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 56) as u8 & 0x0f)
+                .collect();
+            let auto = compress(&noise, BrickEncoding::U8Range, Codec::DEFAULT);
+            let plain = compress(&noise, BrickEncoding::U8Range, CODECS[2]).len();
+            assert!(auto.len() <= plain + 1, "{} > {plain}", auto.len());
+        }
+    }
+
+    fn enc_of(width: usize) -> BrickEncoding {
+        match width {
+            1 => BrickEncoding::U8Range,
+            2 => BrickEncoding::U16Range,
+            _ => BrickEncoding::F32,
+        }
+    }
+
+    #[test]
+    fn format_one_bricks_still_decode() {
+        // What the first release wrote: LZ4 with lz4_flex's size prefix.
+        let v = ramp();
+        let (lo, hi) = value_range(&v);
+        let old = lz4_flex::compress_prepend_size(&quantise(&v, lo, hi, BrickEncoding::U8Range));
         let d = decode(
-            &s,
-            crc32fast::hash(&s),
-            42.5,
-            42.5,
+            &old,
+            checksum(&old),
+            lo,
+            hi,
             BrickEncoding::U8Range,
-            64,
+            v.len(),
+            Framing::Untagged,
         )
         .unwrap();
-        assert!(d.iter().all(|&x| x == 42.5));
+        let new = encode(&v, lo, hi, BrickEncoding::U8Range, Codec::DEFAULT);
+        let d2 = decode(
+            &new,
+            checksum(&new),
+            lo,
+            hi,
+            BrickEncoding::U8Range,
+            v.len(),
+            Framing::Tagged,
+        )
+        .unwrap();
+        assert_eq!(d, d2);
+    }
+
+    #[test]
+    fn codec_names_parse_back_and_bad_ones_are_refused() {
+        for c in CODECS {
+            assert_eq!(Codec::parse(&c.name()), Some(c));
+        }
+        assert_eq!(Codec::parse("zstd"), Some(Codec::parse("zstd1").unwrap()));
+        for bad in ["", "zstd0", "zstd20", "gzip", "lz4+", "+delta", "zstd-1"] {
+            assert_eq!(Codec::parse(bad), None, "{bad}");
+        }
+        assert!(Codec::from_tag(0x02).is_none() && Codec::from_tag(0x20).is_none());
+    }
+
+    #[test]
+    fn constant_brick_decodes_exactly() {
+        let v = vec![42.5f32; 64];
+        for codec in CODECS {
+            let s = encode(&v, 42.5, 42.5, BrickEncoding::U8Range, codec);
+            let d = decode(
+                &s,
+                checksum(&s),
+                42.5,
+                42.5,
+                BrickEncoding::U8Range,
+                64,
+                Framing::Tagged,
+            )
+            .unwrap();
+            assert!(d.iter().all(|&x| x == 42.5));
+        }
     }
 
     #[test]
     fn corruption_is_detected() {
         let v = ramp();
         let (lo, hi) = value_range(&v);
-        let mut s = encode(&v, lo, hi, BrickEncoding::U8Range);
-        let crc = crc32fast::hash(&s);
-        s[5] ^= 0x10;
-        assert!(matches!(
-            decode(&s, crc, lo, hi, BrickEncoding::U8Range, v.len()),
-            Err(DecodeError::Checksum { .. })
-        ));
-        // a wrong expected length is caught even with a valid checksum
-        let s = encode(&v, lo, hi, BrickEncoding::U8Range);
-        assert!(matches!(
-            decode(&s, crc32fast::hash(&s), lo, hi, BrickEncoding::U8Range, 999),
-            Err(DecodeError::Size { .. })
-        ));
+        let enc = BrickEncoding::U8Range;
+        for codec in CODECS {
+            let mut s = encode(&v, lo, hi, enc, codec);
+            let crc = checksum(&s);
+            s[6] ^= 0x10;
+            assert!(matches!(
+                decode(&s, crc, lo, hi, enc, v.len(), Framing::Tagged),
+                Err(DecodeError::Checksum { .. })
+            ));
+            // With a matching checksum, damage is still an error, never a panic.
+            let d = decode(&s, checksum(&s), lo, hi, enc, v.len(), Framing::Tagged);
+            if let Ok(d) = d {
+                assert_eq!(d.len(), v.len());
+            }
+            // a wrong expected length is caught even with a valid checksum
+            let s = encode(&v, lo, hi, enc, codec);
+            assert!(matches!(
+                decode(&s, checksum(&s), lo, hi, enc, 999, Framing::Tagged),
+                Err(DecodeError::Size { .. })
+            ));
+            let mut t = s.clone();
+            t[0] = 0x0f;
+            assert_eq!(
+                decode(&t, checksum(&t), lo, hi, enc, v.len(), Framing::Tagged),
+                Err(DecodeError::Codec(0x0f))
+            );
+        }
     }
 }

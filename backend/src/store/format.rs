@@ -21,7 +21,11 @@ use serde::{Deserialize, Serialize};
 
 pub const MAGIC: [u8; 8] = *b"PXOCTREE";
 pub const FOOTER_MAGIC: [u8; 8] = *b"PXOEND\0\0";
-pub const VERSION: u32 = 1;
+/// The format written. Format 1 (LZ4 bricks without a codec tag) still reads;
+/// format 2 tags every brick with its codec.
+pub const VERSION: u32 = 2;
+/// The oldest format read.
+pub const OLDEST_VERSION: u32 = 1;
 /// Bytes before the header: magic, version, header length, header CRC.
 pub const PREAMBLE_LEN: usize = 20;
 pub const FOOTER_LEN: usize = 32;

@@ -10,7 +10,7 @@
 //! bounded by the windows: Σ_l (B+5)·nx_l·ny_l values, whatever the depth of
 //! the volume. Nothing else of the volume is held.
 
-use crate::store::codec::{self, BrickEncoding};
+use crate::store::codec::{self, BrickEncoding, Codec};
 use crate::store::writer::NodeStats;
 use crate::store::{Header, NodeKey, OctreeLayout, OctreeWriter, Summary, OVERLAP};
 use crate::volume::VolumeSource;
@@ -26,6 +26,8 @@ pub struct ImportOptions {
     /// Brick side B (voxels, overlap excluded).
     pub brick: usize,
     pub encoding: BrickEncoding,
+    /// How bricks are compressed ([`Codec::DEFAULT`] unless told).
+    pub codec: Codec,
     /// Drop bricks whose values (overlap included) are all below this.
     pub empty_below: Option<f32>,
     /// Memory the import may use for its slice windows and brick buffers.
@@ -39,6 +41,7 @@ impl Default for ImportOptions {
         ImportOptions {
             brick: 32,
             encoding: BrickEncoding::U8Range,
+            codec: Codec::DEFAULT,
             empty_below: None,
             memory_mb: 2048,
             progress: false,
@@ -418,7 +421,7 @@ fn encode_brick(
     if empty {
         return e;
     }
-    let bytes = codec::encode(&values, min, max, opts.encoding);
+    let bytes = codec::encode(&values, min, max, opts.encoding, opts.codec);
     if leaf && opts.encoding != BrickEncoding::F32 {
         // Measure the quantisation error on the source voxels this brick owns,
         // through the same decoder the renderer uses.
@@ -429,6 +432,7 @@ fn encode_brick(
             max,
             opts.encoding,
             values.len(),
+            codec::Framing::Tagged,
         )
         .expect("a brick just encoded decodes");
         for z in rz {

@@ -2,10 +2,10 @@
 //! open; each brick is read on its own with a positioned read, checked against
 //! its CRC and decoded. Every error names the file and, for a brick, which one.
 
-use super::codec::{self, BrickEncoding};
+use super::codec::{self, BrickEncoding, Framing};
 use super::format::{
-    bincode_config, Footer, Header, NodeRecord, Summary, Trailer, FOOTER_LEN, MAGIC, PREAMBLE_LEN,
-    VERSION,
+    bincode_config, Footer, Header, NodeRecord, Summary, Trailer, FOOTER_LEN, MAGIC,
+    OLDEST_VERSION, PREAMBLE_LEN, VERSION,
 };
 use super::layout::{NodeKey, OctreeLayout};
 use anyhow::{bail, Context, Result};
@@ -18,6 +18,8 @@ pub struct OctreeDb {
     path: PathBuf,
     file: File,
     file_len: u64,
+    /// How bricks are framed (from the format version).
+    framing: Framing,
     pub header: Header,
     pub nodes: Vec<NodeRecord>,
     pub summary: Summary,
@@ -38,9 +40,16 @@ impl OctreeDb {
             bail!("{name}: truncated ({file_len} bytes)");
         }
         let version = u32::from_le_bytes(pre[8..12].try_into().unwrap());
-        if version != VERSION {
-            bail!("{name}: format version {version} is not supported (this build reads {VERSION})");
+        if !(OLDEST_VERSION..=VERSION).contains(&version) {
+            bail!(
+                "{name}: format version {version} is not supported (this build reads {OLDEST_VERSION} to {VERSION})"
+            );
         }
+        let framing = if version == 1 {
+            Framing::Untagged
+        } else {
+            Framing::Tagged
+        };
         let head_len = u32::from_le_bytes(pre[12..16].try_into().unwrap()) as u64;
         let head_crc = u32::from_le_bytes(pre[16..20].try_into().unwrap());
         if head_len > file_len - (PREAMBLE_LEN + FOOTER_LEN) as u64 {
@@ -136,6 +145,7 @@ impl OctreeDb {
             path: path.to_path_buf(),
             file,
             file_len,
+            framing,
             header,
             nodes: trailer.nodes,
             summary: trailer.summary,
@@ -159,8 +169,35 @@ impl OctreeDb {
         self.header.encoding
     }
 
+    /// How this file's bricks are framed (format 1 or 2).
+    pub fn framing(&self) -> Framing {
+        self.framing
+    }
+
     pub fn node(&self, key: NodeKey) -> Option<&NodeRecord> {
         self.index.get(&key).map(|&i| &self.nodes[i])
+    }
+
+    /// A stored brick's bytes as they are on disk (checksum checked), or
+    /// `None` for an empty node.
+    pub fn read_stored(&self, key: NodeKey) -> Result<Option<Vec<u8>>> {
+        let name = self.path.display();
+        let rec = self
+            .node(key)
+            .with_context(|| format!("{name}: brick {key} does not exist"))?;
+        if !rec.is_stored() {
+            return Ok(None);
+        }
+        let mut bytes = vec![0u8; rec.len as usize];
+        self.file
+            .read_exact_at(&mut bytes, rec.offset)
+            .with_context(|| format!("{name}: brick {key} (offset {}): read failed", rec.offset))?;
+        anyhow::ensure!(
+            codec::checksum(&bytes) == rec.crc,
+            "{name}: brick {key} (offset {}): checksum mismatch",
+            rec.offset
+        );
+        Ok(Some(bytes))
     }
 
     /// Reads, checks and decodes a stored brick: (B+4)³ data values, x fastest.
@@ -184,6 +221,7 @@ impl OctreeDb {
             rec.max,
             self.header.encoding,
             self.header.layout.stored_len(),
+            self.framing,
         )
         .map_err(|e| anyhow::anyhow!("{name}: brick {key} (offset {}): {e}", rec.offset))?;
         Ok(Some(values))
@@ -254,7 +292,13 @@ mod tests {
         };
         let mut w = OctreeWriter::create(path, &header).unwrap();
         let values = vec![10.0f32; layout.stored_len()];
-        let blob = codec::encode(&values, 0.0, 10.0, BrickEncoding::U8Range);
+        let blob = codec::encode(
+            &values,
+            0.0,
+            10.0,
+            BrickEncoding::U8Range,
+            codec::Codec::DEFAULT,
+        );
         let stats = NodeStats {
             min: 0.0,
             max: 10.0,
@@ -378,10 +422,25 @@ mod tests {
     #[test]
     fn a_brick_whose_size_prefix_lies_is_refused_before_allocation() {
         let values = vec![1.0f32; 64];
-        let mut blob = codec::encode(&values, 0.0, 2.0, BrickEncoding::U8Range);
-        blob[..4].copy_from_slice(&u32::MAX.to_le_bytes());
+        let mut blob = codec::encode(
+            &values,
+            0.0,
+            2.0,
+            BrickEncoding::U8Range,
+            codec::Codec::DEFAULT,
+        );
+        blob[1..5].copy_from_slice(&u32::MAX.to_le_bytes());
         let crc = crc32fast::hash(&blob);
-        let e = codec::decode(&blob, crc, 0.0, 2.0, BrickEncoding::U8Range, 64).unwrap_err();
+        let e = codec::decode(
+            &blob,
+            crc,
+            0.0,
+            2.0,
+            BrickEncoding::U8Range,
+            64,
+            Framing::Tagged,
+        )
+        .unwrap_err();
         assert!(matches!(e, codec::DecodeError::Size { .. }), "{e}");
     }
 }
