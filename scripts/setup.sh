@@ -6,6 +6,10 @@
 set -euo pipefail
 
 packages=(openmpi-bin libopenmpi-dev libclang-dev clang pkg-config mesa-vulkan-drivers libvulkan1 mricron-data)
+# What a caller needs beyond that (the tests: the independent DICOM and TIFF
+# writers their inputs come from).
+read -r -a extra <<< "${PARALLAX_EXTRA_PACKAGES:-}"
+packages+=("${extra[@]}")
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

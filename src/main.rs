@@ -39,6 +39,7 @@ enum Command {
     /// Import a volume into the out-of-core octree database (.pxo).
     Import {
         /// .nrrd | .nhdr | .nii | .nii.gz | .raw (with --dims/--type/--spacing)
+        /// | .tif/.tiff (multi-page) | a folder of DICOM slices or of TIFFs
         input: PathBuf,
         #[arg(short, long)]
         output: PathBuf,
@@ -65,9 +66,14 @@ enum Command {
         /// Raw input: u8 | i8 | u16 | i16 | u32 | i32 | f32 | f64
         #[arg(long = "type")]
         voxel_type: Option<String>,
-        /// Raw input: sx,sy,sz (default 1,1,1)
+        /// Raw or TIFF input: sx,sy,sz (raw default 1,1,1; TIFF default from
+        /// ImageJ metadata, else 1,1,1)
         #[arg(long)]
         spacing: Option<String>,
+        /// DICOM folder with several series: the SeriesInstanceUID to import
+        /// (or its number in the listing)
+        #[arg(long)]
+        series: Option<String>,
         /// Raw input: bytes to skip before the data
         #[arg(long, default_value_t = 0)]
         byte_offset: u64,
@@ -267,24 +273,36 @@ fn run(cli: Cli) -> Result<()> {
             spacing,
             byte_offset,
             big_endian,
+            series,
         } => {
             let encoding = BrickEncoding::parse(&quantize)
                 .with_context(|| format!("--quantize '{quantize}': expected u8, u16 or none"))?;
+            let spacing = spacing
+                .map(|s| parse_triple::<f64>(&s, "--spacing"))
+                .transpose()?;
             let raw = match (dims, voxel_type) {
                 (Some(d), Some(t)) => Some(RawParams {
                     dims: parse_triple::<usize>(&d, "--dims")?,
                     voxel_type: parse_type(&t, "--type")?,
-                    spacing: match spacing {
-                        Some(s) => parse_triple::<f64>(&s, "--spacing")?,
-                        None => [1.0; 3],
-                    },
+                    spacing: spacing.unwrap_or([1.0; 3]),
                     byte_offset,
                     big_endian,
                 }),
                 (None, None) => None,
                 _ => bail!("raw input needs both --dims and --type"),
             };
-            let mut src = data::open(&input, raw)?;
+            let mut src = data::open_with(
+                &input,
+                &data::InputOptions {
+                    raw,
+                    series,
+                    spacing,
+                },
+            )?;
+            let described = src.describe();
+            if let Some(d) = &described {
+                eprintln!("note: {d}");
+            }
             let opts = ImportOptions {
                 brick,
                 encoding,
@@ -294,7 +312,11 @@ fn run(cli: Cli) -> Result<()> {
                 progress: std::io::stderr().is_terminal(),
             };
             let name = input.display().to_string();
-            let r = store::import(src.as_mut(), &output, &name, &opts)?;
+            let source = match &described {
+                Some(d) => format!("{name} ({d})"),
+                None => name.clone(),
+            };
+            let r = store::import(src.as_mut(), &output, &source, &opts)?;
             if let Some(note) = src.conversion_note() {
                 eprintln!("note: {note}");
             }

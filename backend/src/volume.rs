@@ -137,6 +137,12 @@ pub trait VolumeSource {
     fn conversion_note(&self) -> Option<String> {
         None
     }
+    /// What import records of the source beside its path and tells the
+    /// user (a DICOM series' UID and patient orientation, a TIFF stack's
+    /// missing spacing), if anything.
+    fn describe(&self) -> Option<String> {
+        None
+    }
 }
 
 /// A whole volume in memory: the reference integrator's input and the small

@@ -9,10 +9,12 @@
 //! Errors name the file and the field or voxel at fault, because the person
 //! reading them is usually looking at a header in a text editor.
 
+pub mod dicom;
 pub mod nifti;
 pub mod nrrd;
 pub mod raw;
 pub mod synth;
+pub mod tiff;
 
 use std::path::Path;
 
@@ -40,6 +42,46 @@ pub struct RawParams {
     pub big_endian: bool,
 }
 
+/// What a source may need beyond its path.
+#[derive(Clone, Debug, Default)]
+pub struct InputOptions {
+    /// A headerless raw file's dims, type and spacing.
+    pub raw: Option<RawParams>,
+    /// Which DICOM series of a folder (UID, or its number in the listing).
+    pub series: Option<String>,
+    /// Voxel spacing of a TIFF stack (overrides its metadata).
+    pub spacing: Option<[f64; 3]>,
+}
+
+/// Opens a volume for streaming: a folder of DICOM slices or of TIFFs, a
+/// multi-page `.tif`/`.tiff`, or a file [`open`] reads.
+pub fn open_with(path: &Path, opts: &InputOptions) -> Result<Box<dyn VolumeSource + Send>> {
+    if opts.raw.is_none() {
+        if path.is_dir() {
+            let has_tiff = !tiff::stack_files(path)?.is_empty();
+            return if has_tiff {
+                Ok(Box::new(tiff::open_tiff(path, opts.spacing)?))
+            } else {
+                Ok(Box::new(dicom::open_dicom(path, opts.series.as_deref())?))
+            };
+        }
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_lowercase())
+            .unwrap_or_default();
+        if name.ends_with(".tif") || name.ends_with(".tiff") {
+            return Ok(Box::new(tiff::open_tiff(path, opts.spacing)?));
+        }
+        if name.ends_with(".dcm") {
+            bail!(
+                "{}: a single DICOM slice; import the folder that holds the series",
+                path.display()
+            );
+        }
+    }
+    open(path, opts.raw.clone())
+}
+
 /// Opens a volume file for streaming, choosing the reader by extension:
 /// `.nrrd` / `.nhdr` (NRRD), `.nii` / `.nii.gz` (NIfTI-1), `.raw`. When `raw`
 /// parameters are given the file is read as raw whatever its name (a name
@@ -64,7 +106,7 @@ pub fn open(path: &Path, raw: Option<RawParams>) -> Result<Box<dyn VolumeSource 
         )
     } else {
         bail!(
-            "{}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz or .raw)",
+            "{}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, .raw, .tif, .tiff, or a folder of DICOM or TIFF slices)",
             path.display()
         )
     }

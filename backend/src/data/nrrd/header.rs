@@ -19,6 +19,9 @@ const MAX_HEADER_BYTES: u64 = 1 << 20;
 pub enum NrrdEncoding {
     Raw,
     Gzip,
+    Bzip2,
+    /// Two hexadecimal digits a byte, white space ignored.
+    Hex,
     /// Values written as text, separated by white space.
     Ascii,
 }
@@ -80,10 +83,11 @@ fn parse_encoding(label: &str, value: &str) -> Result<NrrdEncoding> {
         "raw" => NrrdEncoding::Raw,
         "gzip" | "gz" => NrrdEncoding::Gzip,
         "ascii" | "text" | "txt" => NrrdEncoding::Ascii,
-        "hex" | "bzip2" | "bz2" => {
-            bail!("{label}: encoding '{value}' is not supported (use raw, gzip or ascii)")
-        }
-        _ => bail!("{label}: encoding '{value}' is not a NRRD encoding (use raw, gzip or ascii)"),
+        "bzip2" | "bz2" => NrrdEncoding::Bzip2,
+        "hex" => NrrdEncoding::Hex,
+        _ => bail!(
+            "{label}: encoding '{value}' is not a NRRD encoding (raw, gzip, bzip2, ascii or hex)"
+        ),
     })
 }
 

@@ -78,6 +78,33 @@ pub fn open_nrrd(path: &Path) -> Result<RawSource> {
                 .with_context(|| format!("{label}: byte skip {}", header.byte_skip))?;
             Ok(RawSource::from_reader(label, info, false, false, Box::new(reader)).as_text())
         }
+        NrrdEncoding::Bzip2 => {
+            let mut dec = bzip2::read::MultiBzDecoder::new(reader);
+            skip_bytes(&mut dec, header.byte_skip as u64)
+                .with_context(|| format!("{label}: byte skip {}", header.byte_skip))?;
+            Ok(RawSource::from_reader(
+                label,
+                info,
+                header.big_endian,
+                true,
+                Box::new(dec),
+            ))
+        }
+        NrrdEncoding::Hex => {
+            let mut dec = HexReader {
+                inner: reader,
+                label: label.clone(),
+            };
+            skip_bytes(&mut dec, header.byte_skip.max(0) as u64)
+                .with_context(|| format!("{label}: byte skip {}", header.byte_skip))?;
+            Ok(RawSource::from_reader(
+                label,
+                info,
+                header.big_endian,
+                false,
+                Box::new(dec),
+            ))
+        }
         NrrdEncoding::Gzip => {
             let mut dec = MultiGzDecoder::new(reader);
             skip_bytes(&mut dec, header.byte_skip as u64)
@@ -90,5 +117,60 @@ pub fn open_nrrd(path: &Path) -> Result<RawSource> {
                 Box::new(dec),
             ))
         }
+    }
+}
+
+/// Bytes written as pairs of hexadecimal digits (NRRD `encoding: hex`),
+/// white space anywhere.
+struct HexReader<R> {
+    inner: R,
+    label: String,
+}
+
+impl<R: BufRead> std::io::Read for HexReader<R> {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        let mut n = 0;
+        let mut pair = [0u8; 2];
+        let mut have = 0;
+        while n < out.len() {
+            let buf = self.inner.fill_buf()?;
+            if buf.is_empty() {
+                if have == 1 {
+                    return Err(std::io::Error::new(
+                        std::io::ErrorKind::InvalidData,
+                        format!("{}: an odd number of hex digits", self.label),
+                    ));
+                }
+                break;
+            }
+            let mut used = 0;
+            for &c in buf {
+                if n == out.len() {
+                    break;
+                }
+                used += 1;
+                if c.is_ascii_whitespace() {
+                    continue;
+                }
+                let Some(d) = (c as char).to_digit(16) else {
+                    return Err(std::io::Error::new(
+                        std::io::ErrorKind::InvalidData,
+                        format!("{}: '{}' is not a hex digit", self.label, c.escape_ascii()),
+                    ));
+                };
+                pair[have] = d as u8;
+                have += 1;
+                if have == 2 {
+                    out[n] = pair[0] << 4 | pair[1];
+                    n += 1;
+                    have = 0;
+                }
+            }
+            self.inner.consume(used);
+            if n > 0 && have == 0 {
+                break;
+            }
+        }
+        Ok(n)
     }
 }

@@ -214,14 +214,9 @@ fn bad_headers_name_file_and_field() {
             "type 'quux' is not a NRRD type",
         ),
         (
-            base("uchar", "3", "2 2 2", "bzip2", ""),
+            base("uchar", "3", "2 2 2", "zip", ""),
             vec![0; 8],
-            "encoding 'bzip2' is not supported (use raw, gzip or ascii)",
-        ),
-        (
-            base("uchar", "3", "2 2 2", "hex", ""),
-            vec![0; 8],
-            "encoding 'hex' is not supported",
+            "encoding 'zip' is not a NRRD encoding (raw, gzip, bzip2, ascii or hex)",
         ),
         (
             base("uchar", "2", "2 2", "raw", ""),
@@ -297,17 +292,44 @@ fn bad_headers_name_file_and_field() {
             "{header:?}: got {err:?}, want {want:?}"
         );
     }
-    let err = open_error(
-        d,
-        &base("uchar", "3", "2 2 2", "hex", ""),
-        b"0102030405060708",
-    );
-    assert_eq!(
-        err,
-        format!(
-            "{}: encoding 'hex' is not supported (use raw, gzip or ascii)",
-            d.join("bad.nrrd").display()
-        )
+    // hex and bzip2 read; a bad digit or a damaged stream is named.
+    for (enc, data) in [
+        ("hex", b"01 02 0a 0B\n0c0d 0e ff\n".to_vec()),
+        ("bzip2", {
+            let mut e = bzip2::write::BzEncoder::new(Vec::new(), bzip2::Compression::default());
+            e.write_all(&[1, 2, 10, 11, 12, 13, 14, 255]).unwrap();
+            e.finish().unwrap()
+        }),
+    ] {
+        let p = d.join(format!("{enc}.nrrd"));
+        let mut bytes =
+            format!("NRRD0004\n{}\n", base("uchar", "3", "2 2 2", enc, "")).into_bytes();
+        bytes.extend_from_slice(&data);
+        fs::write(&p, &bytes).unwrap();
+        let mut src = open_nrrd(&p).unwrap();
+        let v = Volume::read_all(&mut src).unwrap();
+        assert_eq!(
+            v.data,
+            [1.0, 2.0, 10.0, 11.0, 12.0, 13.0, 14.0, 255.0],
+            "{enc}"
+        );
+        bytes.truncate(bytes.len() - 3);
+        fs::write(&p, &bytes).unwrap();
+        let e = open_nrrd(&p).and_then(|mut s| Volume::read_all(&mut s).map(|_| ()));
+        assert!(
+            format!("{:#}", e.unwrap_err()).contains(&format!("{enc}.nrrd")),
+            "{enc}"
+        );
+    }
+    let p = d.join("badhex.nrrd");
+    let mut bytes = format!("NRRD0004\n{}\n", base("uchar", "3", "2 2 2", "hex", "")).into_bytes();
+    bytes.extend_from_slice(b"0102030405060g08");
+    fs::write(&p, &bytes).unwrap();
+    let e = open_nrrd(&p).and_then(|mut s| Volume::read_all(&mut s).map(|_| ()));
+    let e = format!("{:#}", e.unwrap_err());
+    assert!(
+        e.contains("badhex.nrrd") && e.contains("'g' is not a hex digit"),
+        "{e}"
     );
 
     let path = d.join("nomagic.nrrd");

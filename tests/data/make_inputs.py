@@ -1,0 +1,143 @@
+#!/usr/bin/python3
+"""Writes the test inputs that independent tools produce: DICOM series
+(pydicom) and TIFF stacks (tifffile) of one CT-like volume, which is also
+written as a plain NRRD so the project's own reader gives the reference.
+
+Usage: make_inputs.py OUT_DIR
+
+OUT_DIR/
+  ct.nrrd                 int16 Hounsfield units, 0.7 × 0.6 × 1.5 mm
+  dicom/                  the volume as a CT series: uint16 + RescaleIntercept
+                          −1024, files named in shuffled order
+  dicom-rle/              the same series, RLE lossless
+  dicom-two/              two series in one folder
+  dicom-missing/          the series with one slice removed
+  dicom-uneven/           the series with one slice moved by 0.4 mm
+  dicom-tilt/             the series with a 2° gantry tilt tag
+  dicom-j2k/              one slice claiming JPEG 2000 (not decoded here)
+  tiff/                   one 2-D int16 TIFF per slice, natural-order names
+  stack.tif               one multi-page uint16 TIFF with ImageJ metadata
+  stack-f32.tif           one multi-page float32 TIFF
+"""
+import os
+import random
+import shutil
+import sys
+
+import numpy as np
+import pydicom
+from pydicom.dataset import Dataset, FileDataset, FileMetaDataset
+from pydicom.uid import (ExplicitVRLittleEndian, RLELossless,
+                         JPEG2000Lossless, generate_uid, CTImageStorage)
+import tifffile
+
+NX, NY, NZ = 24, 20, 16
+SPACING = (0.7, 0.6, 1.5)  # x (between columns), y (between rows), z
+
+
+def volume():
+    z, y, x = np.mgrid[0:NZ, 0:NY, 0:NX]
+    cx, cy, cz = (NX - 1) / 2, (NY - 1) / 2, (NZ - 1) / 2
+    r = np.sqrt(((x - cx) * SPACING[0]) ** 2 + ((y - cy) * SPACING[1]) ** 2
+                + ((z - cz) * SPACING[2]) ** 2)
+    hu = np.where(r < 6.0, 40, -1000)
+    hu = np.where((r > 4.5) & (r < 6.0), 1000, hu)
+    rng = np.random.default_rng(7)
+    hu = hu + rng.integers(-20, 21, size=hu.shape)
+    hu[0, 0, 0] = -1024  # the stored minimum
+    hu[-1, -1, -1] = 3071  # and maximum
+    return hu.astype(np.int16)  # (z, y, x)
+
+
+def write_nrrd(path, vol):
+    header = ("NRRD0004\ntype: int16\ndimension: 3\nsizes: %d %d %d\n"
+              "spacings: %r %r %r\nendian: little\nencoding: raw\n\n"
+              % (NX, NY, NZ, SPACING[0], SPACING[1], SPACING[2]))
+    with open(path, "wb") as f:
+        f.write(header.encode())
+        f.write(vol.astype("<i2").tobytes())
+
+
+def write_series(folder, vol, series_uid, description, z_positions,
+                 syntax=ExplicitVRLittleEndian, tilt=None, names=None):
+    os.makedirs(folder, exist_ok=True)
+    study = "1.2.826.0.1.3680043.8.498.1"
+    order = list(range(len(z_positions)))
+    random.Random(3).shuffle(order)
+    for n, k in enumerate(order):
+        meta = FileMetaDataset()
+        meta.MediaStorageSOPClassUID = CTImageStorage
+        meta.MediaStorageSOPInstanceUID = generate_uid()
+        meta.TransferSyntaxUID = ExplicitVRLittleEndian
+        name = names[k] if names else "IM%04d" % n
+        ds = FileDataset(os.path.join(folder, name), {}, file_meta=meta,
+                         preamble=b"\0" * 128)
+        ds.SOPClassUID = CTImageStorage
+        ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
+        ds.StudyInstanceUID = study
+        ds.SeriesInstanceUID = series_uid
+        ds.SeriesDescription = description
+        ds.Modality = "CT"
+        ds.InstanceNumber = k + 1
+        ds.Rows, ds.Columns = NY, NX
+        ds.PixelSpacing = [SPACING[1], SPACING[0]]  # row spacing, column spacing
+        ds.SliceThickness = SPACING[2]
+        ds.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
+        ds.ImagePositionPatient = [-10.0, 20.0, z_positions[k]]
+        ds.SamplesPerPixel = 1
+        ds.PhotometricInterpretation = "MONOCHROME2"
+        ds.BitsAllocated = 16
+        ds.BitsStored = 12
+        ds.HighBit = 11
+        ds.PixelRepresentation = 0
+        ds.RescaleIntercept = -1024
+        ds.RescaleSlope = 1
+        if tilt is not None:
+            ds.GantryDetectorTilt = tilt
+        stored = (vol[min(k, vol.shape[0] - 1)].astype(np.int32) + 1024).astype(np.uint16)
+        ds.PixelData = stored.tobytes()
+        ds.is_little_endian = True
+        ds.is_implicit_VR = False
+        if syntax == RLELossless:
+            ds.compress(RLELossless, stored)
+        elif syntax != ExplicitVRLittleEndian:
+            ds.file_meta.TransferSyntaxUID = syntax
+            ds.PixelData = pydicom.encaps.encapsulate([b"\xff\x4f\xff\x51not a codestream"])
+        ds.save_as(os.path.join(folder, name), write_like_original=False)
+
+
+def main():
+    out = sys.argv[1]
+    shutil.rmtree(out, ignore_errors=True)
+    os.makedirs(out)
+    vol = volume()
+    write_nrrd(os.path.join(out, "ct.nrrd"), vol)
+    z = [100.0 + k * SPACING[2] for k in range(NZ)]
+    uid = "1.2.826.0.1.3680043.8.498.10"
+    write_series(os.path.join(out, "dicom"), vol, uid, "head 1.5 mm", z)
+    write_series(os.path.join(out, "dicom-rle"), vol, uid, "head RLE", z, syntax=RLELossless)
+    two = os.path.join(out, "dicom-two")
+    write_series(two, vol, uid, "head 1.5 mm", z, names=["a%02d" % k for k in range(NZ)])
+    write_series(two, vol[:4], "1.2.826.0.1.3680043.8.498.11", "scout", z[:4],
+                 names=["b%02d" % k for k in range(4)])
+    missing = z[:7] + z[8:]
+    write_series(os.path.join(out, "dicom-missing"), np.delete(vol, 7, axis=0), uid, "gap", missing)
+    uneven = list(z)
+    uneven[9] += 0.4
+    write_series(os.path.join(out, "dicom-uneven"), vol, uid, "uneven", uneven)
+    write_series(os.path.join(out, "dicom-tilt"), vol, uid, "tilt", z, tilt=2.0)
+    write_series(os.path.join(out, "dicom-j2k"), vol[:2], uid, "j2k", z[:2], syntax=JPEG2000Lossless)
+
+    tdir = os.path.join(out, "tiff")
+    os.makedirs(tdir)
+    for k in range(NZ):  # slice2 must come before slice10
+        tifffile.imwrite(os.path.join(tdir, "slice%d.tif" % k), vol[k])
+    u16 = (vol.astype(np.int32) + 1024).astype(np.uint16)
+    tifffile.imwrite(os.path.join(out, "stack.tif"), u16, imagej=True,
+                     resolution=(1 / SPACING[0], 1 / SPACING[1]),
+                     metadata={"spacing": SPACING[2], "unit": "mm"})
+    tifffile.imwrite(os.path.join(out, "stack-f32.tif"), vol.astype(np.float32) / 7.0)
+
+
+if __name__ == "__main__":
+    main()

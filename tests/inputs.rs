@@ -1,0 +1,276 @@
+//! The data people bring, written by independent tools: DICOM series
+//! (pydicom) and TIFF stacks (tifffile), against the same volume written as
+//! NRRD. `tests/data/make_inputs.py` writes them; the test command installs
+//! python3-pydicom, python3-tifffile and python3-numpy.
+
+use parallax_backend::data::{self, InputOptions};
+use parallax_backend::volume::{Volume, VoxelType};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// The inputs, written once per test run.
+fn inputs() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("inputs");
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/make_inputs.py");
+        let o = Command::new("/usr/bin/python3")
+            .arg(&script)
+            .arg(&dir)
+            .output()
+            .expect("run /usr/bin/python3");
+        assert!(
+            o.status.success(),
+            "{} failed (the test command installs python3-pydicom, python3-tifffile, python3-numpy):\n{}",
+            script.display(),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        dir
+    })
+}
+
+fn read(path: &Path, opts: &InputOptions) -> Volume {
+    let mut src = data::open_with(path, opts).unwrap();
+    Volume::read_all(src.as_mut()).unwrap()
+}
+
+fn reference() -> Volume {
+    read(&inputs().join("ct.nrrd"), &InputOptions::default())
+}
+
+fn open_err(path: &Path, opts: &InputOptions) -> String {
+    match data::open_with(path, opts) {
+        Ok(_) => panic!("{} opened", path.display()),
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+#[test]
+fn a_dicom_series_imports_to_the_voxels_spacing_and_hounsfield_units_of_the_nrrd() {
+    let nrrd = reference();
+    assert_eq!(nrrd.info.dims, [24, 20, 16]);
+    for folder in ["dicom", "dicom-rle"] {
+        let dcm = read(&inputs().join(folder), &InputOptions::default());
+        assert_eq!(dcm.info.dims, nrrd.info.dims, "{folder}");
+        for a in 0..3 {
+            assert!(
+                (dcm.info.spacing[a] - nrrd.info.spacing[a]).abs() < 1e-9,
+                "{folder}: spacing {:?} vs {:?}",
+                dcm.info.spacing,
+                nrrd.info.spacing
+            );
+        }
+        assert_eq!(dcm.info.voxel_type, VoxelType::I16, "{folder}: HU fit i16");
+        assert_eq!(dcm.data, nrrd.data, "{folder}: every voxel, in HU");
+    }
+    // Hounsfield units, not stored values: the extremes written are −1024 and 3071.
+    let (lo, hi) = nrrd.range();
+    assert_eq!((lo, hi), (-1024.0, 3071.0));
+}
+
+#[test]
+fn a_folder_of_several_series_lists_them_and_series_chooses() {
+    let two = inputs().join("dicom-two");
+    let e = open_err(&two, &InputOptions::default());
+    assert!(
+        e.contains("2 series")
+            && e.contains("--series")
+            && e.contains("1.2.826.0.1.3680043.8.498.10")
+            && e.contains("\"scout\"  4 slices"),
+        "{e}"
+    );
+    let list = data::dicom::list_series(&two).unwrap();
+    assert_eq!(list.len(), 2);
+    assert_eq!(list[1].slices, 4);
+    let by_uid = read(
+        &two,
+        &InputOptions {
+            series: Some("1.2.826.0.1.3680043.8.498.10".into()),
+            ..Default::default()
+        },
+    );
+    assert_eq!(by_uid.data, reference().data);
+    let by_number = read(
+        &two,
+        &InputOptions {
+            series: Some("2".into()),
+            ..Default::default()
+        },
+    );
+    assert_eq!(by_number.info.dims, [24, 20, 4]);
+    let e = open_err(
+        &two,
+        &InputOptions {
+            series: Some("9.9.9".into()),
+            ..Default::default()
+        },
+    );
+    assert!(e.contains("--series 9.9.9: no such series"), "{e}");
+}
+
+#[test]
+fn broken_series_get_errors_naming_the_file_and_the_tag() {
+    let d = InputOptions::default();
+    let e = open_err(&inputs().join("dicom-missing"), &d);
+    assert!(
+        e.contains("missing slice")
+            && e.contains("ImagePositionPatient (0020,0032)")
+            && e.contains("2×"),
+        "{e}"
+    );
+    let e = open_err(&inputs().join("dicom-uneven"), &d);
+    assert!(
+        e.contains("uneven slice spacing")
+            && e.contains("(0020,0032)")
+            && e.contains("1.9000 mm")
+            && e.contains("IM00"),
+        "{e}"
+    );
+    let e = open_err(&inputs().join("dicom-tilt"), &d);
+    assert!(e.contains("GantryDetectorTilt (0018,1120) is 2°"), "{e}");
+    let e = open_err(&inputs().join("dicom-j2k"), &d);
+    assert!(
+        e.contains("TransferSyntaxUID (0002,0010) 1.2.840.10008.1.2.4.90")
+            && e.contains("JPEG 2000"),
+        "{e}"
+    );
+    let empty = tempfile::tempdir().unwrap();
+    std::fs::write(empty.path().join("notes.txt"), "x").unwrap();
+    let e = open_err(empty.path(), &d);
+    assert!(
+        e.contains("no DICOM files") && e.contains("1 other files"),
+        "{e}"
+    );
+}
+
+#[test]
+fn tiff_stacks_import_to_the_voxels_of_the_nrrd() {
+    let nrrd = reference();
+    // A folder of 2-D TIFFs named slice0 … slice15: natural order.
+    let folder = read(
+        &inputs().join("tiff"),
+        &InputOptions {
+            spacing: Some([0.7, 0.6, 1.5]),
+            ..Default::default()
+        },
+    );
+    assert_eq!(folder.info.dims, nrrd.info.dims);
+    assert_eq!(folder.info.voxel_type, VoxelType::I16);
+    assert_eq!(folder.info.spacing, [0.7, 0.6, 1.5]);
+    assert_eq!(folder.data, nrrd.data);
+    // One multi-page uint16 TIFF with ImageJ metadata: spacing from it.
+    let stack = read(&inputs().join("stack.tif"), &InputOptions::default());
+    assert_eq!(stack.info.voxel_type, VoxelType::U16);
+    for a in 0..3 {
+        assert!(
+            (stack.info.spacing[a] - nrrd.info.spacing[a]).abs() < 1e-6,
+            "{:?}",
+            stack.info.spacing
+        );
+    }
+    let shifted: Vec<f32> = nrrd.data.iter().map(|v| v + 1024.0).collect();
+    assert_eq!(stack.data, shifted);
+    // Float pages.
+    let f = read(&inputs().join("stack-f32.tif"), &InputOptions::default());
+    assert_eq!(f.info.voxel_type, VoxelType::F32);
+    let expect: Vec<f32> = nrrd.data.iter().map(|v| v / 7.0).collect();
+    assert_eq!(f.data, expect);
+}
+
+#[test]
+fn natural_order_puts_slice2_before_slice10() {
+    use parallax_backend::data::tiff::natural_cmp;
+    let mut v = vec!["s10.tif", "s2.tif", "s1.tif", "s002b.tif", "a.tif"];
+    v.sort_by(|a, b| natural_cmp(a, b));
+    assert_eq!(v, ["a.tif", "s1.tif", "s2.tif", "s002b.tif", "s10.tif"]);
+}
+
+/// The DICOM series and the NRRD render the same image through the real
+/// binary (import, then render).
+#[test]
+fn a_dicom_series_renders_the_same_image_as_the_nrrd() {
+    let d = tempfile::tempdir().unwrap();
+    let bin = env!("CARGO_BIN_EXE_parallax");
+    let run = |args: &[&str]| {
+        let o = Command::new(bin).args(args).output().unwrap();
+        assert!(
+            o.status.success(),
+            "parallax {args:?}:\n{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
+    };
+    let nrrd = inputs().join("ct.nrrd");
+    let dicom = inputs().join("dicom");
+    run(&[
+        "import",
+        nrrd.to_str().unwrap(),
+        "-o",
+        d.path().join("a.pxo").to_str().unwrap(),
+        "--brick",
+        "8",
+    ]);
+    let said = run(&[
+        "import",
+        dicom.to_str().unwrap(),
+        "-o",
+        d.path().join("b.pxo").to_str().unwrap(),
+        "--brick",
+        "8",
+    ]);
+    assert!(said.contains("patient (LPS) directions"), "{said}");
+    let info = run(&["info", d.path().join("b.pxo").to_str().unwrap()]);
+    assert!(
+        info.contains("DICOM series 1.2.826.0.1.3680043.8.498.10"),
+        "{info}"
+    );
+    std::fs::write(
+        d.path().join("tf.toml"),
+        "[[point]]\nvalue = -1000\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 0\ncolor = [0.9, 0.5, 0.4]\nextinction = 0.3\n[[point]]\nvalue = 1000\ncolor = [1, 1, 1]\nextinction = 2\n",
+    )
+    .unwrap();
+    std::fs::write(
+        d.path().join("display.toml"),
+        "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.01\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
+    )
+    .unwrap();
+    std::fs::create_dir_all(d.path().join("p")).unwrap();
+    std::fs::write(
+        d.path().join("p/v.toml"),
+        "id = \"v\"\nposition = [0, 0, 0.8]\nresolution = [40, 30]\n",
+    )
+    .unwrap();
+    let mut images = Vec::new();
+    for db in ["a", "b"] {
+        let scene = d.path().join(format!("{db}.toml"));
+        std::fs::write(
+            &scene,
+            format!("volume = \"{db}.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\nrotation_deg = [20, 30, 0]\n"),
+        )
+        .unwrap();
+        let out = d.path().join(format!("out-{db}"));
+        run(&[
+            "render",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--float",
+        ]);
+        let frames: Vec<_> = std::fs::read_dir(&out)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().starts_with("frame_"))
+            .map(|e| e.path())
+            .collect();
+        let last = frames.iter().max().unwrap();
+        let (_, _, px) = parallax_backend::output::read_npy(&last.join("v.npy")).unwrap();
+        assert!(
+            px.iter().any(|p| p[3] > 0.05),
+            "{db}: the volume is visible"
+        );
+        images.push(px);
+    }
+    assert_eq!(images[0], images[1], "bit for bit");
+}
