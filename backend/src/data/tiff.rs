@@ -320,7 +320,7 @@ impl VolumeSource for TiffSource {
     fn read_slices(&mut self, out: &mut [f32]) -> Result<()> {
         let n = self.info.dims[0] * self.info.dims[1];
         ensure!(
-            out.len() % n == 0,
+            out.len().is_multiple_of(n),
             "{}: read_slices needs whole slices",
             self.label
         );
