@@ -14,10 +14,15 @@
 //!   and opacity-weighted colour k̃̄/τ̄·α, stable for tiny and huge τ̄·d.
 //! * [`EmptinessTable`]: integer prefix counts that answer "is τ ≡ 0 on
 //!   [min, max]?" conservatively, for empty-space skipping.
+//! * [`presets`]: ParaView colour-map presets and 3D Slicer volume-property
+//!   presets (`presets.xml`, `.vp`, `.vp.json`) converted to transfer
+//!   functions (VTK opacity per unit distance → extinction) and written as
+//!   TOML.
 
 mod empty;
 mod function;
 mod preint;
+pub mod presets;
 
 #[cfg(test)]
 mod tests;
