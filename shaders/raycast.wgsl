@@ -118,6 +118,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     tn = min(tn, next_break(&ray, tc));
                 }
                 let s = sample_brick(leaf, o + d * tn);
+                if (NO_DATA && !(has_data(s) && has_data(s_prev))) {
+                    // A segment with an end that lacks data adds nothing.
+                    s_prev = s;
+                    tc = tn;
+                    if (tc >= t_exit) {
+                        break;
+                    }
+                    continue;
+                }
                 let avg = segment_average(0u, frame.counts.w, s_prev, s);
                 var smp: Sample;
                 smp.pos = o + d * (0.5 * (tc + tn));

@@ -1,7 +1,7 @@
 //! `parallax`: the command line (DESIGN.md "Command line").
 
 use anyhow::{bail, Context, Result};
-use clap::{Parser, Subcommand};
+use clap::{Parser, Subcommand, ValueEnum};
 use parallax_backend::data::{self, synth::SynthKind, RawParams};
 use parallax_backend::store::codec::Codec;
 use parallax_backend::store::{self, info, ImportOptions};
@@ -74,6 +74,10 @@ enum Command {
         /// (or its number in the listing)
         #[arg(long)]
         series: Option<String>,
+        /// NaN in float input: refuse (an error naming the voxel) or empty
+        /// ("no data": never shown, never blended into its neighbours)
+        #[arg(long, value_enum, default_value_t = NanPolicy::Refuse)]
+        nan: NanPolicy,
         /// Raw input: bytes to skip before the data
         #[arg(long, default_value_t = 0)]
         byte_offset: u64,
@@ -143,6 +147,11 @@ enum Command {
         /// Quantisation of the bricks for --codecs: u8 | u16 | none.
         #[arg(long, default_value = "u8")]
         quantize: String,
+    },
+    /// Transfer functions: import ParaView and 3D Slicer presets.
+    Tf {
+        #[command(subcommand)]
+        action: TfAction,
     },
     /// Write a HoloVizio-like light field wall: DIR/display.toml and one
     /// file per projector (defaults: the 72-projector wall of G10 §6).
@@ -274,6 +283,7 @@ fn run(cli: Cli) -> Result<()> {
             byte_offset,
             big_endian,
             series,
+            nan,
         } => {
             let encoding = BrickEncoding::parse(&quantize)
                 .with_context(|| format!("--quantize '{quantize}': expected u8, u16 or none"))?;
@@ -297,6 +307,7 @@ fn run(cli: Cli) -> Result<()> {
                     raw,
                     series,
                     spacing,
+                    nan_empty: nan == NanPolicy::Empty,
                 },
             )?;
             let described = src.describe();
@@ -319,6 +330,12 @@ fn run(cli: Cli) -> Result<()> {
             let r = store::import(src.as_mut(), &output, &source, &opts)?;
             if let Some(note) = src.conversion_note() {
                 eprintln!("note: {note}");
+            }
+            if r.no_data_voxels > 0 {
+                eprintln!(
+                    "note: {} voxels are NaN: no data (never shown, never blended into their neighbours)",
+                    r.no_data_voxels
+                );
             }
             println!(
                 "imported {} → {}: {} nodes ({} stored, {} empty), {:.1} MB → {:.1} MB in {:.2} s ({:.0} MB/s of source)",
@@ -441,6 +458,61 @@ fn run(cli: Cli) -> Result<()> {
                     out.display()
                 );
             }
+        }
+        Command::Tf {
+            action:
+                TfAction::Import {
+                    input,
+                    name,
+                    list,
+                    range,
+                    unit,
+                    missing_opacity,
+                    display_colours,
+                    output,
+                },
+        } => {
+            use parallax_common::tf::presets;
+            if list {
+                let text = std::fs::read_to_string(&input)
+                    .with_context(|| format!("{}: cannot read", input.display()))?;
+                for n in presets::preset_names(&text, &input.display().to_string())? {
+                    println!("{n}");
+                }
+                return Ok(());
+            }
+            let opts = presets::ImportOptions {
+                range: range
+                    .map(|r| {
+                        let [lo, hi] = parse_list::<f64, 2>(&r, "--range")?;
+                        anyhow::ensure!(lo < hi, "--range {r}: expected lo < hi");
+                        Ok((lo, hi))
+                    })
+                    .transpose()?,
+                unit,
+                missing_opacity,
+                linearize: !display_colours,
+                ..Default::default()
+            };
+            if let Some(u) = unit {
+                anyhow::ensure!(
+                    u.is_finite() && u > 0.0,
+                    "--unit {u}: expected a positive length"
+                );
+            }
+            let p = presets::import_preset_file(&input, name.as_deref(), &opts)?;
+            for n in &p.notes {
+                eprintln!("note: {n}");
+            }
+            let output = output.context("-o/--output: where to write the transfer function")?;
+            parallax_common::atomic::write(&output, p.to_toml().as_bytes())?;
+            println!(
+                "wrote {} ({} \"{}\", {} points)",
+                output.display(),
+                p.format.description(),
+                p.name,
+                p.tf.points().len()
+            );
         }
         Command::DisplayGen {
             projectors,
@@ -768,4 +840,62 @@ fn parse_codec(s: &str) -> std::result::Result<Codec, String> {
             "'{s}': expected lz4, zstd or zstdN (N = 1–19), optionally followed by +delta or +auto"
         )
     })
+}
+
+/// What NaN in float input means.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum NanPolicy {
+    /// An error naming the voxel.
+    Refuse,
+    /// No data: never shown, never blended into its neighbours.
+    Empty,
+}
+
+#[derive(Subcommand)]
+enum TfAction {
+    /// Convert a ParaView colour-map JSON (with or without opacity points),
+    /// a 3D Slicer presets.xml, .vp or .vp.json into Parallax's TOML.
+    Import {
+        input: PathBuf,
+        /// The preset in a file of several (exact, unique case-insensitive
+        /// match, or #N); --list shows them.
+        #[arg(long)]
+        name: Option<String>,
+        /// List the presets in the file and stop.
+        #[arg(long)]
+        list: bool,
+        /// lo,hi: stretch the preset over this data range (as ParaView
+        /// applies a preset; needed for normalised colour maps).
+        #[arg(long, allow_hyphen_values = true)]
+        range: Option<String>,
+        /// VTK's scalar opacity unit distance, in data length units
+        /// (default: the file's, else 1).
+        #[arg(long)]
+        unit: Option<f64>,
+        /// Opacity of a preset that has none: ramp | ramp:LOW,HIGH | const:A |
+        /// reject.
+        #[arg(long, default_value = "ramp")]
+        missing_opacity: parallax_common::tf::presets::MissingOpacity,
+        /// Keep colours as the preset's display values instead of decoding
+        /// sRGB to linear.
+        #[arg(long)]
+        display_colours: bool,
+        /// The TOML file to write (needed unless --list).
+        #[arg(short, long, required_unless_present = "list")]
+        output: Option<PathBuf>,
+    },
+}
+
+fn parse_list<T: std::str::FromStr, const N: usize>(s: &str, flag: &str) -> Result<[T; N]> {
+    let v: Vec<T> = s
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<T>()
+                .map_err(|_| anyhow::anyhow!("{flag} '{s}': '{t}' is not a number"))
+        })
+        .collect::<Result<_>>()?;
+    let n = v.len();
+    v.try_into()
+        .map_err(|_| anyhow::anyhow!("{flag} '{s}': expected {N} values, got {n}"))
 }

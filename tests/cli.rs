@@ -110,11 +110,11 @@ fn bad_input_gets_a_clear_error_and_keeps_existing_output() {
     let nrrd = d.path().join("a.nrrd");
     std::fs::write(
         &nrrd,
-        "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: hex\n\n0001020304050607\n",
+        "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: hex\n\n00010203040506\n",
     )
     .unwrap();
     let e = fails(&["import", s(&nrrd), "-o", s(&out)]);
-    assert!(e.contains("a.nrrd") && e.contains("hex"), "{e}");
+    assert!(e.contains("a.nrrd") && e.contains("truncated"), "{e}");
     let e = fails(&[
         "import",
         s(&raw),
@@ -369,4 +369,58 @@ fn a_float64_volume_imports_and_says_what_rounding_changed() {
     );
     let info = ok(&["info", s(&d.path().join("f64.pxo")), "--verify"]);
     assert!(info.contains("f64"), "{info}");
+}
+
+/// `parallax tf import`: a 3D Slicer presets.xml excerpt with two presets is
+/// listed, one is converted, and the result renders as a transfer function.
+#[test]
+fn tf_import_converts_a_slicer_preset() {
+    let d = tempfile::tempdir().unwrap();
+    let xml = write(
+        d.path().join("presets.xml"),
+        "<MRML>\n<VolumeProperty name=\"CT-Test\" scalarOpacity=\"8 -1000 0 0 0 300 0.5 1000 1\" \
+         colorTransfer=\"8 -1000 0 0 0 1000 1 1 1\"/>\n<VolumeProperty name=\"MR-Test\" \
+         scalarOpacity=\"4 0 0 100 1\" colorTransfer=\"8 0 0 0 0 100 1 0.5 0\"/>\n</MRML>\n",
+    );
+    let out = ok(&["tf", "import", s(&xml), "--list"]);
+    assert_eq!(out.lines().collect::<Vec<_>>(), ["CT-Test", "MR-Test"]);
+    let e = fails(&["tf", "import", s(&xml), "-o", s(&d.path().join("x.toml"))]);
+    assert!(e.contains("presets.xml") && e.contains("CT-Test"), "{e}");
+    let toml = d.path().join("ct.toml");
+    let out = ok(&["tf", "import", s(&xml), "--name", "ct-test", "-o", s(&toml)]);
+    assert!(out.contains("CT-Test"), "{out}");
+    let tf = parallax_common::tf::TransferFunction::load(&toml).unwrap();
+    // α = 0.5 per 1 mm at 300 HU: τ = ln 2.
+    let t = tf.eval(300.0).tau;
+    assert!((t - std::f64::consts::LN_2).abs() < 1e-9, "{t}");
+    assert!(tf.eval(1000.0).tau.is_finite());
+    assert!(!d.path().join("x.toml").exists());
+}
+
+/// NaN in float input: refused naming the voxel (with the hint), imported
+/// as "no data" with `--nan empty`.
+#[test]
+fn nan_is_refused_or_no_data() {
+    let d = tempfile::tempdir().unwrap();
+    let mut bytes =
+        b"NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4 4\nendian: little\nencoding: raw\n\n"
+            .to_vec();
+    for i in 0..64 {
+        let v = if i == 21 { f32::NAN } else { i as f32 };
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    let vol = d.path().join("nan.nrrd");
+    std::fs::write(&vol, &bytes).unwrap();
+    let db = d.path().join("nan.pxo");
+    let e = fails(&["import", s(&vol), "-o", s(&db)]);
+    assert!(
+        e.contains("nan.nrrd") && e.contains("voxel (1,1,1) is NaN") && e.contains("--nan empty"),
+        "{e}"
+    );
+    assert!(!db.exists());
+    let o = parallax(&["import", s(&vol), "-o", s(&db), "--nan", "empty"]);
+    assert!(o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("1 voxels are NaN: no data"), "{err}");
+    ok(&["info", s(&db), "--verify"]);
 }

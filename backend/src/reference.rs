@@ -136,7 +136,8 @@ pub fn integrate_kept(
     let mut acc = Accumulator::new(tol.abs, t1 - t0);
     for w in breaks.windows(2) {
         let (a, b) = (w[0], w[1]);
-        if b <= a {
+        // A cell whose eight voxels are all no data (NaN) adds nothing.
+        if b <= a || field(0.5 * (a + b)).is_nan() {
             continue;
         }
         for piece in smooth_pieces(&field, a, b, &kinks).windows(2) {
@@ -359,7 +360,11 @@ fn gauss(field: &impl Fn(f64) -> f64, tf: &TransferFunction, a: f64, b: f64) -> 
     let mut tau = [0.0; 8];
     let mut em = [[0.0; 3]; 8];
     for k in 0..8 {
-        let o = tf.eval(field(mid + half * GL_X[k]));
+        let v = field(mid + half * GL_X[k]);
+        if v.is_nan() {
+            continue; // no data: transparent
+        }
+        let o = tf.eval(v);
         tau[k] = o.tau;
         em[k] = o.emission;
     }

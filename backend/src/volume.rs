@@ -143,6 +143,9 @@ pub trait VolumeSource {
     fn describe(&self) -> Option<String> {
         None
     }
+    /// NaN in the input means "no data": passed on as NaN instead of
+    /// refused (sources whose samples cannot be NaN ignore this).
+    fn set_nan_empty(&mut self) {}
 }
 
 /// A whole volume in memory: the reference integrator's input and the small
@@ -202,7 +205,9 @@ impl Volume {
     }
 
     /// The scalar field at a point of volume space: the trilinear interpolant
-    /// of the voxel values, clamped to the edge voxels (DESIGN.md).
+    /// of the voxel values, clamped to the edge voxels (DESIGN.md). Voxels
+    /// without data (NaN) are left out: the weights of the others are
+    /// renormalised, and where all eight are NaN the result is NaN (no data).
     pub fn sample(&self, p: [f64; 3]) -> f64 {
         let mut i0 = [0usize; 3];
         let mut i1 = [0usize; 3];
@@ -216,6 +221,30 @@ impl Volume {
             w[a] = u - f;
         }
         let v = |i: usize, j: usize, k: usize| self.voxel(i, j, k) as f64;
+        let corners = [
+            v(i0[0], i0[1], i0[2]),
+            v(i1[0], i0[1], i0[2]),
+            v(i0[0], i1[1], i0[2]),
+            v(i1[0], i1[1], i0[2]),
+            v(i0[0], i0[1], i1[2]),
+            v(i1[0], i0[1], i1[2]),
+            v(i0[0], i1[1], i1[2]),
+            v(i1[0], i1[1], i1[2]),
+        ];
+        if corners.iter().any(|c| c.is_nan()) {
+            let (mut sum, mut wsum) = (0.0, 0.0);
+            for (c, &value) in corners.iter().enumerate() {
+                if value.is_nan() {
+                    continue;
+                }
+                let weight = (if c & 1 == 1 { w[0] } else { 1.0 - w[0] })
+                    * (if c & 2 == 2 { w[1] } else { 1.0 - w[1] })
+                    * (if c & 4 == 4 { w[2] } else { 1.0 - w[2] });
+                sum += weight * value;
+                wsum += weight;
+            }
+            return if wsum > 0.0 { sum / wsum } else { f64::NAN };
+        }
         let x00 = v(i0[0], i0[1], i0[2]) * (1.0 - w[0]) + v(i1[0], i0[1], i0[2]) * w[0];
         let x10 = v(i0[0], i1[1], i0[2]) * (1.0 - w[0]) + v(i1[0], i1[1], i0[2]) * w[0];
         let x01 = v(i0[0], i0[1], i1[2]) * (1.0 - w[0]) + v(i1[0], i0[1], i1[2]) * w[0];

@@ -51,11 +51,22 @@ pub struct InputOptions {
     pub series: Option<String>,
     /// Voxel spacing of a TIFF stack (overrides its metadata).
     pub spacing: Option<[f64; 3]>,
+    /// NaN in float input means "no data" (`--nan empty`) instead of an
+    /// error.
+    pub nan_empty: bool,
 }
 
 /// Opens a volume for streaming: a folder of DICOM slices or of TIFFs, a
 /// multi-page `.tif`/`.tiff`, or a file [`open`] reads.
 pub fn open_with(path: &Path, opts: &InputOptions) -> Result<Box<dyn VolumeSource + Send>> {
+    let mut src = open_any(path, opts)?;
+    if opts.nan_empty {
+        src.set_nan_empty();
+    }
+    Ok(src)
+}
+
+fn open_any(path: &Path, opts: &InputOptions) -> Result<Box<dyn VolumeSource + Send>> {
     if opts.raw.is_none() {
         if path.is_dir() {
             let has_tiff = !tiff::stack_files(path)?.is_empty();
@@ -311,8 +322,10 @@ pub(crate) fn check_finite(
     dims: [usize; 3],
     first: u64,
     values: &[f32],
+    nan_is_no_data: bool,
 ) -> Result<()> {
-    if let Some(pos) = values.iter().position(|v| !v.is_finite()) {
+    let bad = |v: &f32| !v.is_finite() && !(nan_is_no_data && v.is_nan());
+    if let Some(pos) = values.iter().position(bad) {
         let v = values[pos];
         let idx = first + pos as u64;
         let nx = dims[0] as u64;
@@ -325,7 +338,12 @@ pub(crate) fn check_finite(
         } else {
             "-infinity"
         };
-        bail!("{label}: voxel ({i},{j},{k}) is {what}");
+        let hint = if v.is_nan() {
+            " (if NaN means \"no data\" here, import with --nan empty)"
+        } else {
+            ""
+        };
+        bail!("{label}: voxel ({i},{j},{k}) is {what}{hint}");
     }
     Ok(())
 }
@@ -370,9 +388,15 @@ mod tests {
         let dims = [4, 3, 2];
         let mut v = vec![0f32; 24];
         v[4 * 3 + 4 + 2] = f32::NAN; // (2,1,1)
-        let err = check_finite("a.nrrd", dims, 0, &v).unwrap_err().to_string();
-        assert_eq!(err, "a.nrrd: voxel (2,1,1) is NaN");
-        let err = check_finite("a.nrrd", dims, 12, &[0.0, f32::NEG_INFINITY]).unwrap_err();
+        let err = check_finite("a.nrrd", dims, 0, &v, false)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            err,
+            "a.nrrd: voxel (2,1,1) is NaN (if NaN means \"no data\" here, import with --nan empty)"
+        );
+        assert!(check_finite("a.nrrd", dims, 0, &v, true).is_ok());
+        let err = check_finite("a.nrrd", dims, 12, &[0.0, f32::NEG_INFINITY], true).unwrap_err();
         assert_eq!(err.to_string(), "a.nrrd: voxel (1,0,1) is -infinity");
     }
 

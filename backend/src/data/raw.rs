@@ -42,6 +42,8 @@ pub struct RawSource {
     text: bool,
     /// Values read so far (text), for naming a bad one.
     values_read: u64,
+    /// NaN means "no data" (`--nan empty`).
+    nan_empty: bool,
 }
 
 impl RawSource {
@@ -69,6 +71,7 @@ impl RawSource {
             rounding: Default::default(),
             text: false,
             values_read: 0,
+            nan_empty: false,
         }
     }
 
@@ -150,7 +153,7 @@ impl RawSource {
         if self.text {
             self.read_text_slice(k, out)?;
             let first = k as u64 * self.info.slice_len() as u64;
-            return check_finite(&self.label, self.info.dims, first, out);
+            return check_finite(&self.label, self.info.dims, first, out, self.nan_empty);
         }
         let nz = self.info.dims[2];
         self.buf.resize(out.len() * self.stored.bytes(), 0);
@@ -173,7 +176,7 @@ impl RawSource {
         }
         if self.stored.is_float() || self.stored.may_round() || self.scale.is_some() {
             let first = k as u64 * self.info.slice_len() as u64;
-            check_finite(&self.label, self.info.dims, first, out)?;
+            check_finite(&self.label, self.info.dims, first, out, self.nan_empty)?;
         }
         Ok(())
     }
@@ -182,6 +185,10 @@ impl RawSource {
 impl VolumeSource for RawSource {
     fn info(&self) -> &VolumeInfo {
         &self.info
+    }
+
+    fn set_nan_empty(&mut self) {
+        self.nan_empty = true;
     }
 
     fn conversion_note(&self) -> Option<String> {

@@ -37,6 +37,7 @@ pub struct TiffSource {
     next: usize,
     note: Option<String>,
     rounding: super::Rounding,
+    nan_empty: bool,
 }
 
 fn open_decoder(path: &Path) -> Result<TiffDecoder> {
@@ -206,6 +207,7 @@ pub fn open_tiff(path: &Path, spacing: Option<[f64; 3]>) -> Result<TiffSource> {
         next: 0,
         note,
         rounding: Default::default(),
+        nan_empty: false,
     })
 }
 
@@ -306,7 +308,13 @@ impl TiffSource {
             DecodingResult::F64(v) => fill!(v, true),
             _ => bail!("{page_label}: unsupported sample type"),
         }
-        check_finite(&self.label, self.info.dims, (k * n) as u64, out)?;
+        check_finite(
+            &self.label,
+            self.info.dims,
+            (k * n) as u64,
+            out,
+            self.nan_empty,
+        )?;
         self.next += 1;
         Ok(())
     }
@@ -341,5 +349,9 @@ impl VolumeSource for TiffSource {
 
     fn describe(&self) -> Option<String> {
         self.note.clone()
+    }
+
+    fn set_nan_empty(&mut self) {
+        self.nan_empty = true;
     }
 }

@@ -226,7 +226,9 @@ pub struct Raycaster {
     /// One pipeline per combination of stepper, enhancers and shading that
     /// a frame has used (G10 §5: a kernel specialised for what the scene
     /// uses), built when first needed.
-    pipelines: HashMap<(KernelKey, bool), wgpu::ComputePipeline>,
+    pipelines: HashMap<(KernelKey, bool, bool), wgpu::ComputePipeline>,
+    /// The pool holds f32 values (else 8-bit codes).
+    float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
     tools: wgpu::Buffer,
     /// The per-frame buffers, kept across frames and grown by capacity.
@@ -472,6 +474,7 @@ impl Raycaster {
             sampler,
             hw_filter,
             pipelines: HashMap::new(),
+            float_pool,
             tools,
             frame: FrameBuffers::new(gpu),
         })
@@ -488,8 +491,9 @@ impl Raycaster {
         gpu: &Gpu,
         kernel: &KernelKey,
         shading: bool,
+        no_data: bool,
     ) -> Result<&wgpu::ComputePipeline> {
-        let key = (kernel.clone(), shading);
+        let key = (kernel.clone(), shading, no_data);
         if !self.pipelines.contains_key(&key) {
             let source = shader::kernel(kernel)?;
             let module = gpu.validated("shaders/raycast.wgsl", || {
@@ -502,7 +506,19 @@ impl Raycaster {
             let flag = |b: bool| if b { 1.0 } else { 0.0 };
             let constants = [
                 ("SHADING", flag(shading)),
-                ("HW_FILTER", flag(self.hw_filter)),
+                // Hardware filtering would blend the no-data value in.
+                ("HW_FILTER", flag(self.hw_filter && !no_data)),
+                ("NO_DATA", flag(no_data)),
+                // A tap at or above this is a no-data voxel: the top code of
+                // an 8-bit pool, NO_DATA_VALUE in a float pool.
+                (
+                    "NO_DATA_TAP",
+                    if self.float_pool {
+                        1.0e38
+                    } else {
+                        254.5 / 255.0
+                    },
+                ),
             ];
             let p = gpu.validated("ray casting pipeline", || {
                 gpu.device
@@ -654,7 +670,7 @@ impl Raycaster {
         let max_w = views.iter().map(|v| v.resolution[0]).max().unwrap_or(0);
         let max_h = views.iter().map(|v| v.resolution[1]).max().unwrap_or(0);
         let pipeline = self
-            .pipeline(gpu, &settings.kernel, settings.shading)?
+            .pipeline(gpu, &settings.kernel, settings.shading, pool.no_data)?
             .clone();
         let fr = &self.frame;
         let bind = &fr.bind.as_ref().expect("made above").0;

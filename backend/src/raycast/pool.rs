@@ -6,6 +6,10 @@
 use crate::gpu::Gpu;
 use anyhow::{bail, Result};
 
+/// What a no-data voxel is in a float pool (the kernel's `NO_DATA_TAP`
+/// threshold is 1e38 there).
+pub const NO_DATA_VALUE: f32 = 3.0e38;
+
 pub struct BrickPool {
     pub(crate) texture: wgpu::Texture,
     pub(crate) view: wgpu::TextureView,
@@ -16,6 +20,9 @@ pub struct BrickPool {
     pub side: u32,
     /// Full precision (`r32float`) or 8 bit (`r8unorm`).
     pub float: bool,
+    /// Some uploaded brick had no-data voxels (NaN): the kernel must
+    /// leave them out of its interpolation.
+    pub no_data: bool,
     uploaded: u64,
     /// Which pool this is (a bind group names one pool).
     pub(crate) id: u64,
@@ -82,6 +89,7 @@ impl BrickPool {
             grid,
             side,
             float,
+            no_data: false,
             uploaded: 0,
             id: super::next_resource_id(),
         })
@@ -106,22 +114,35 @@ impl BrickPool {
             y: slot / self.grid[0] % self.grid[1] * s,
             z: slot / (self.grid[0] * self.grid[1]) * s,
         };
+        // No-data voxels (NaN) become the pool's no-data value: the top
+        // code of an 8-bit slot (values take the 255 codes below it), or
+        // NO_DATA_VALUE in a float pool. The kernel leaves them out of its
+        // interpolation once the pool has any (`no_data`).
+        let has_nan = values.iter().any(|v| v.is_nan());
+        self.no_data |= has_nan;
         let (bytes, range): (Vec<u8>, [f32; 2]) = if self.float {
-            (bytemuck::cast_slice(values).to_vec(), [0.0, 1.0])
+            let v: Vec<f32> = values
+                .iter()
+                .map(|&v| if v.is_nan() { NO_DATA_VALUE } else { v })
+                .collect();
+            (bytemuck::cast_slice(&v).to_vec(), [0.0, 1.0])
         } else {
             let (lo, hi) = crate::store::codec::value_range(values);
             let span = hi - lo;
+            let top = if has_nan { 254.0 } else { 255.0 };
             let q = values
                 .iter()
                 .map(|&v| {
-                    if span > 0.0 {
-                        ((v - lo) / span * 255.0).round().clamp(0.0, 255.0) as u8
+                    if v.is_nan() {
+                        255
+                    } else if span > 0.0 {
+                        ((v - lo) / span * top).round().clamp(0.0, top) as u8
                     } else {
                         0
                     }
                 })
                 .collect();
-            (q, [lo, span])
+            (q, [lo, span * 255.0 / top])
         };
         let bpp = if self.float { 4 } else { 1 };
         gpu.queue.write_texture(

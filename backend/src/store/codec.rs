@@ -175,7 +175,7 @@ impl Codec {
             1 => Compressor::Zstd(0),
             _ => return None,
         };
-        if tag & !0x1f != 0 {
+        if tag & !(0x1f | NO_DATA_BIT) != 0 {
             return None;
         }
         Some(Codec {
@@ -189,8 +189,15 @@ impl Codec {
     }
 }
 
+/// Tag bit of a quantised brick that holds no-data voxels (NaN in the
+/// source, imported with `--nan empty`): its top code (255, 65535) means "no
+/// data" and the values use the codes below it. Full-precision bricks keep
+/// NaN as it is.
+const NO_DATA_BIT: u8 = 0x20;
+
 /// Quantises (if the encoding says so) and compresses a brick whose values
-/// span [min, max]. The result is what is stored on disk (format 2).
+/// span [min, max] (NaN, "no data", aside). The result is what is stored on
+/// disk (format 2).
 pub fn encode(
     values: &[f32],
     min: f32,
@@ -198,19 +205,35 @@ pub fn encode(
     encoding: BrickEncoding,
     codec: Codec,
 ) -> Vec<u8> {
-    compress(&quantise(values, min, max, encoding), encoding, codec)
+    let no_data = encoding != BrickEncoding::F32 && values.iter().any(|v| v.is_nan());
+    let mut out = compress(
+        &quantise(values, min, max, encoding, no_data),
+        encoding,
+        codec,
+    );
+    if no_data {
+        out[0] |= NO_DATA_BIT;
+    }
+    out
 }
 
-/// A brick's values as the bytes the encoding stores (little endian).
-pub fn quantise(values: &[f32], min: f32, max: f32, encoding: BrickEncoding) -> Vec<u8> {
+/// A brick's values as the bytes the encoding stores (little endian). With
+/// `no_data`, NaN takes the top code and values the codes below it.
+pub fn quantise(
+    values: &[f32],
+    min: f32,
+    max: f32,
+    encoding: BrickEncoding,
+    no_data: bool,
+) -> Vec<u8> {
     match encoding {
         BrickEncoding::F32 => bytemuck::cast_slice::<f32, u8>(values).to_vec(),
         BrickEncoding::U8Range => {
-            let q = Quantiser::new(min, max, encoding);
+            let q = Quantiser::new(min, max, encoding, no_data);
             values.iter().map(|&v| q.quantise(v) as u8).collect()
         }
         BrickEncoding::U16Range => {
-            let q = Quantiser::new(min, max, encoding);
+            let q = Quantiser::new(min, max, encoding, no_data);
             values
                 .iter()
                 .flat_map(|&v| (q.quantise(v) as u16).to_le_bytes())
@@ -439,12 +462,19 @@ pub fn decode(
         });
     }
     let raw = decompress(stored, encoding, len * bytes_per_value(encoding), framing)?;
-    Ok(dequantise(&raw, min, max, encoding))
+    let no_data = framing == Framing::Tagged && stored[0] & NO_DATA_BIT != 0;
+    Ok(dequantise(&raw, min, max, encoding, no_data))
 }
 
-/// Quantised bytes back to data values.
-pub fn dequantise(raw: &[u8], min: f32, max: f32, encoding: BrickEncoding) -> Vec<f32> {
-    let q = Quantiser::new(min, max, encoding);
+/// Quantised bytes back to data values (NaN for the no-data code).
+pub fn dequantise(
+    raw: &[u8],
+    min: f32,
+    max: f32,
+    encoding: BrickEncoding,
+    no_data: bool,
+) -> Vec<f32> {
+    let q = Quantiser::new(min, max, encoding, no_data);
     match encoding {
         BrickEncoding::F32 => raw
             .chunks_exact(4)
@@ -464,20 +494,35 @@ struct Quantiser {
     min: f64,
     step: f64,
     steps: f64,
+    /// The no-data code (the top one), when the brick has no-data voxels.
+    no_data: Option<u32>,
 }
 
 impl Quantiser {
-    fn new(min: f32, max: f32, encoding: BrickEncoding) -> Self {
-        let steps = encoding.steps();
+    fn new(min: f32, max: f32, encoding: BrickEncoding, no_data: bool) -> Self {
+        let full = encoding.steps();
+        let (steps, no_data) = if no_data && full > 0.0 {
+            (full - 1.0, Some(full as u32))
+        } else {
+            (full, None)
+        };
         let span = max as f64 - min as f64;
         Quantiser {
             min: min as f64,
-            step: if steps > 0.0 { span / steps } else { 0.0 },
+            step: if steps > 0.0 && span.is_finite() {
+                span / steps
+            } else {
+                0.0
+            },
             steps,
+            no_data,
         }
     }
 
     fn quantise(&self, v: f32) -> u32 {
+        if let (Some(code), true) = (self.no_data, v.is_nan()) {
+            return code;
+        }
         if self.step <= 0.0 {
             return 0;
         }
@@ -487,6 +532,9 @@ impl Quantiser {
     }
 
     fn value(&self, code: u32) -> f32 {
+        if Some(code) == self.no_data {
+            return f32::NAN;
+        }
         (self.min + code as f64 * self.step) as f32
     }
 }
@@ -531,7 +579,7 @@ mod tests {
         let v = ramp();
         let (lo, hi) = value_range(&v);
         for enc in ENCODINGS {
-            let exact = quantise(&v, lo, hi, enc);
+            let exact = quantise(&v, lo, hi, enc, false);
             for codec in CODECS {
                 let s = encode(&v, lo, hi, enc, codec);
                 if codec.filter != Filter::Auto {
@@ -601,7 +649,8 @@ mod tests {
         // What the first release wrote: LZ4 with lz4_flex's size prefix.
         let v = ramp();
         let (lo, hi) = value_range(&v);
-        let old = lz4_flex::compress_prepend_size(&quantise(&v, lo, hi, BrickEncoding::U8Range));
+        let old =
+            lz4_flex::compress_prepend_size(&quantise(&v, lo, hi, BrickEncoding::U8Range, false));
         let d = decode(
             &old,
             checksum(&old),
@@ -636,6 +685,37 @@ mod tests {
             assert_eq!(Codec::parse(bad), None, "{bad}");
         }
         assert!(Codec::from_tag(0x02).is_none() && Codec::from_tag(0x20).is_none());
+    }
+
+    #[test]
+    fn no_data_voxels_survive_every_encoding_and_codec() {
+        let mut v = ramp();
+        for i in (0..v.len()).step_by(7) {
+            v[i] = f32::NAN;
+        }
+        let (lo, hi) = value_range(&v);
+        assert!(lo.is_finite() && hi.is_finite());
+        for enc in ENCODINGS {
+            for codec in CODECS {
+                let s = encode(&v, lo, hi, enc, codec);
+                let d = decode(&s, checksum(&s), lo, hi, enc, v.len(), Framing::Tagged).unwrap();
+                // The top code is no data: the bound is that of one code fewer.
+                let bound = match enc {
+                    BrickEncoding::U8Range => (hi - lo) as f64 / (2.0 * 254.0),
+                    BrickEncoding::U16Range => (hi - lo) as f64 / (2.0 * 65534.0),
+                    BrickEncoding::F32 => 0.0,
+                };
+                for (a, b) in v.iter().zip(&d) {
+                    assert_eq!(a.is_nan(), b.is_nan(), "{enc:?} {}", codec.name());
+                    if !a.is_nan() {
+                        assert!((*a as f64 - *b as f64).abs() <= bound + 1e-3, "{a} {b}");
+                    }
+                }
+            }
+        }
+        // A brick without NaN keeps every code for values.
+        let s = encode(&ramp(), lo, hi, BrickEncoding::U8Range, Codec::DEFAULT);
+        assert_eq!(s[0] & NO_DATA_BIT, 0);
     }
 
     #[test]

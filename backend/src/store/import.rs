@@ -56,6 +56,8 @@ pub struct ImportReport {
     pub empty: usize,
     pub file_bytes: u64,
     pub source_bytes: u64,
+    /// Voxels without data (NaN, imported with `--nan empty`).
+    pub no_data_voxels: u64,
     pub seconds: f64,
     pub summary: Summary,
 }
@@ -129,6 +131,7 @@ pub fn import(
     );
 
     let (mut vmin, mut vmax) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut no_data = 0u64;
     let leaf = layout.leaf_level() as usize;
     for z in 0..info.dims[2] {
         let mut slice = vec![0f32; info.slice_len()];
@@ -137,6 +140,7 @@ pub fn import(
         for &v in &slice {
             vmin = vmin.min(v);
             vmax = vmax.max(v);
+            no_data += v.is_nan() as u64;
         }
         push_slice(&mut levels, leaf, slice, &mut sink)?;
         bar.inc(1);
@@ -174,6 +178,7 @@ pub fn import(
         empty,
         file_bytes,
         source_bytes: info.source_bytes(),
+        no_data_voxels: no_data,
         seconds: start.elapsed().as_secs_f64(),
         summary,
     })
@@ -282,7 +287,7 @@ fn push_slice(levels: &mut [Level], l: usize, slice: Vec<f32>, sink: &mut Sink) 
             emit_row(lv, sink)?;
         }
         match (half, lv.pending.take()) {
-            (Some(h), Some(p)) => Some(p.iter().zip(&h).map(|(a, b)| 0.5 * (a + b)).collect()),
+            (Some(h), Some(p)) => Some(p.iter().zip(&h).map(|(&a, &b)| mean2(a, b)).collect()),
             (Some(h), None) => {
                 lv.pending = Some(h);
                 None
@@ -296,8 +301,19 @@ fn push_slice(levels: &mut [Level], l: usize, slice: Vec<f32>, sink: &mut Sink) 
     Ok(())
 }
 
+/// The mean of two voxels, of the one that has data when the other is NaN
+/// (no data), NaN when neither has.
+fn mean2(a: f32, b: f32) -> f32 {
+    match (a.is_nan(), b.is_nan()) {
+        (false, false) => 0.5 * (a + b),
+        (true, _) => b,
+        (false, true) => a,
+    }
+}
+
 /// 2×2 average of a slice in x and y; at an odd edge the average is over the
-/// voxels that exist.
+/// voxels that exist, and no-data (NaN) voxels are left out of it (NaN only
+/// where all four are).
 fn halve_xy(s: &[f32], nx: usize, ny: usize) -> Vec<f32> {
     let (hx, hy) = (nx.div_ceil(2), ny.div_ceil(2));
     let mut out = Vec::with_capacity(hx * hy);
@@ -305,21 +321,22 @@ fn halve_xy(s: &[f32], nx: usize, ny: usize) -> Vec<f32> {
         let (y0, y1) = (2 * j, (2 * j + 1).min(ny - 1));
         for i in 0..hx {
             let (x0, x1) = (2 * i, (2 * i + 1).min(nx - 1));
-            let mut sum = s[y0 * nx + x0];
-            let mut n = 1.0;
+            let mut taps = [f32::NAN; 4];
+            taps[0] = s[y0 * nx + x0];
             if x1 != x0 {
-                sum += s[y0 * nx + x1];
-                n += 1.0;
+                taps[1] = s[y0 * nx + x1];
             }
             if y1 != y0 {
-                sum += s[y1 * nx + x0];
-                n += 1.0;
+                taps[2] = s[y1 * nx + x0];
                 if x1 != x0 {
-                    sum += s[y1 * nx + x1];
-                    n += 1.0;
+                    taps[3] = s[y1 * nx + x1];
                 }
             }
-            out.push(sum / n);
+            let (sum, n) = taps
+                .iter()
+                .filter(|v| !v.is_nan())
+                .fold((0f32, 0f32), |(s, n), &v| (s + v, n + 1.0));
+            out.push(if n > 0.0 { sum / n } else { f32::NAN });
         }
     }
     out
@@ -395,21 +412,31 @@ fn encode_brick(
     for z in rz.clone() {
         for y in ry.clone() {
             for &v in &values[(z * side + y) * side + rx.start..(z * side + y) * side + rx.end] {
-                sum += v as f64;
-                sq += v as f64 * v as f64;
-                n += 1;
+                if !v.is_nan() {
+                    sum += v as f64;
+                    sq += v as f64 * v as f64;
+                    n += 1;
+                }
             }
         }
     }
-    let mean = sum / n as f64;
+    let mean = if n > 0 { sum / n as f64 } else { 0.0 };
     let variance = (sq / n as f64 - mean * mean).max(0.0);
+    // No data at all: recorded as [0, 0] and not stored.
+    let (min, max, no_data) = if min > max {
+        (0.0, 0.0, true)
+    } else {
+        (min, max, false)
+    };
     let stats = NodeStats {
         min,
         max,
         mean: mean as f32,
         variance: variance as f32,
     };
-    let empty = opts.empty_below.is_some_and(|t| max < t);
+    // A brick with no data at all (every value NaN: min > max) is never
+    // stored, so never loaded.
+    let empty = no_data || opts.empty_below.is_some_and(|t| max < t);
     let mut e = Encoded {
         key,
         stats,
@@ -440,6 +467,9 @@ fn encode_brick(
                 for x in rx.clone() {
                     let i = (z * side + y) * side + x;
                     let d = (values[i] as f64 - decoded[i] as f64).abs();
+                    if d.is_nan() {
+                        continue;
+                    }
                     e.quant_sq += d * d;
                     e.quant_max = e.quant_max.max(d);
                     e.quant_n += 1;

@@ -120,6 +120,7 @@ impl NrrdWriter {
             self.info.dims,
             self.written,
             values,
+            false,
         )?;
         let mut buf = std::mem::take(&mut self.buf);
         buf.clear();
