@@ -324,7 +324,7 @@ pub(crate) fn check_finite(
     values: &[f32],
     nan_is_no_data: bool,
 ) -> Result<()> {
-    let bad = |v: &f32| !v.is_finite() && !(nan_is_no_data && v.is_nan());
+    let bad = |v: &f32| !(v.is_finite() || nan_is_no_data && v.is_nan());
     if let Some(pos) = values.iter().position(bad) {
         let v = values[pos];
         let idx = first + pos as u64;
