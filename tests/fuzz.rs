@@ -445,7 +445,8 @@ transfer_function = \"tf.toml\"\n[[key]]\nframe = 10\nplacement = { rotation_deg
     assert!(Scene::load(&d.path().join("scene.toml")).is_ok());
     assert!(Display::load(&d.path().join("display.toml")).is_ok());
     parallax_frontend::script::Script::load(&d.path().join("script.toml")).unwrap();
-    let cases: [(&str, &str, PathBuf, &dyn Fn(&Path) -> anyhow::Result<()>); 5] = [
+    type Parser<'a> = &'a dyn Fn(&Path) -> anyhow::Result<()>;
+    let cases: [(&str, &str, PathBuf, Parser); 5] = [
         ("tf", &tf_seed, d.path().join("tf.toml"), &|p| {
             parallax_common::tf::TransferFunction::load(p).map(|_| ())
         }),
