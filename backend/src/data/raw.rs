@@ -487,6 +487,18 @@ mod tests {
         std::fs::write(&p, bytes).unwrap();
         let mut src = open_raw(&p, &params([2, 2, 2], VoxelType::F32, false)).unwrap();
         let err = Volume::read_all(&mut src).unwrap_err().to_string();
-        assert_eq!(err, format!("{}: voxel (1,1,1) is NaN", p.display()));
+        assert_eq!(
+            err,
+            format!(
+                "{}: voxel (1,1,1) is NaN{}",
+                p.display(),
+                " (if NaN means \"no data\" here, import with --nan empty)"
+            )
+        );
+        // --nan empty: NaN passes as no data.
+        let mut src = open_raw(&p, &params([2, 2, 2], VoxelType::F32, false)).unwrap();
+        src.set_nan_empty();
+        let v = Volume::read_all(&mut src).unwrap();
+        assert!(v.data[7].is_nan() && v.data[..7].iter().all(|x| *x == 0.0));
     }
 }

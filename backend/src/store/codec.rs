@@ -684,7 +684,8 @@ mod tests {
         for bad in ["", "zstd0", "zstd20", "gzip", "lz4+", "+delta", "zstd-1"] {
             assert_eq!(Codec::parse(bad), None, "{bad}");
         }
-        assert!(Codec::from_tag(0x02).is_none() && Codec::from_tag(0x20).is_none());
+        assert!(Codec::from_tag(0x02).is_none() && Codec::from_tag(0x40).is_none());
+        assert!(Codec::from_tag(0x31).is_some(), "zstd, delta, no data");
     }
 
     #[test]

@@ -366,7 +366,11 @@ fn truncated_gzip_and_nan_are_errors() {
     );
     assert_eq!(
         err,
-        format!("{}: voxel (2,0,1) is NaN", d.join("bad.nrrd").display())
+        format!(
+            "{}: voxel (2,0,1) is NaN{}",
+            d.join("bad.nrrd").display(),
+            " (if NaN means \"no data\" here, import with --nan empty)"
+        )
     );
 }
 
