@@ -25,8 +25,10 @@ cp "$out/brain/frame_00007/window.png" "$out/colin27-brain.png"
 # Tools and enhancers: a clip plane with an emphasis band, and MImDA.
 $px render --scene configs/scenes/colin27-clip.toml --frames 8 --sync --out "$out/clip"
 $px render --scene configs/scenes/colin27-mimda.toml --frames 8 --sync --out "$out/mimda"
+$px render --scene configs/scenes/colin27-iso.toml --frames 8 --sync --out "$out/iso"
 cp "$out/clip/frame_00007/window.png" "$out/colin27-clip.png"
 cp "$out/mimda/frame_00007/window.png" "$out/colin27-mimda.png"
+cp "$out/iso/frame_00007/window.png" "$out/colin27-iso.png"
 
 # The light field: a 16-projector wall (η = 1), and what five eyes along
 # the viewing line see on it.
@@ -44,5 +46,5 @@ $px simulate --display configs/displays/wall16/display.toml --frames "$out/wall1
 
 echo
 echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png, $out/colin27-clip.png,"
-echo "         $out/colin27-mimda.png, $out/wall16-eyes.png and $out/wall16-clip-eyes.png"
+echo "         $out/colin27-mimda.png, $out/colin27-iso.png, $out/wall16-eyes.png and $out/wall16-clip-eyes.png"
 echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"

@@ -118,6 +118,47 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     tn = min(tn, next_break(&ray, tc));
                 }
                 let s = sample_brick(leaf, o + d * tn);
+                if (ISO) {
+                    // The first crossing of the isovalue, opaque and shaded;
+                    // a tool may cut it away (opacity 0) or fade it.
+                    if (iso_brackets(s_prev, s)) {
+                        let th = iso_refine(leaf, o, d, tc, tn, s_prev);
+                        var smp: Sample;
+                        smp.pos = o + d * th;
+                        smp.len = 0.0;
+                        smp.dir = d;
+                        smp.scalar = frame.iso.x;
+                        smp.tau = 1.0;
+                        smp.emission = frame.iso.yzw;
+                        smp.alpha_scale = 1.0;
+                        smp.alpha_mix = 0.0;
+                        smp.material = frame.light;
+                        if (NEEDS_GRADIENT) {
+                            smp.gradient = gradient(leaf, smp.pos);
+                        }
+                        chain_sample(&smp);
+                        let a = clamp(mix(smp.alpha_scale, 1.0, smp.alpha_mix), 0.0, 1.0);
+                        if (a > 0.0) {
+                            var shade = 1.0;
+                            if (SHADING) {
+                                let g = gradient(leaf, smp.pos);
+                                let gl = length(g);
+                                if (gl > 1e-6) {
+                                    let diff = abs(dot(g / gl, d));
+                                    let m = smp.material;
+                                    shade = m.x + m.y * diff + m.z * pow(diff, m.w);
+                                }
+                            }
+                            over(&acc, vec4<f32>(max(smp.emission, vec3<f32>(0.0)) * shade * a, a));
+                        }
+                    }
+                    s_prev = s;
+                    tc = tn;
+                    if (tc >= t_exit || terminated(acc)) {
+                        break;
+                    }
+                    continue;
+                }
                 if (NO_DATA && !(has_data(s) && has_data(s_prev))) {
                     // A segment with an end that lacks data adds nothing.
                     s_prev = s;

@@ -9,7 +9,7 @@ use crate::raycast::{
     BrickPool, Filtering, KernelKey, Raycaster, RenderInputs, RenderSettings, SceneGeometry,
     TfTable, ToolParams,
 };
-use crate::store::{BrickEncoding, OctreeDb};
+use crate::store::{BrickEncoding, NodeKey, OctreeDb};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Interpolation, Mode, RenderConfig, Shading};
@@ -28,6 +28,9 @@ struct ActiveTf {
     /// Emptiness for refracting kernels: a range is skipped only where
     /// τ = 0 and ν = 1 (a transparent lens still bends rays).
     empty_refraction: EmptinessTable,
+    /// The function itself (the isosurface takes its colour at the
+    /// isovalue).
+    function: TransferFunction,
 }
 
 pub struct Renderer {
@@ -142,10 +145,22 @@ impl Renderer {
             table: TfTable::new(&self.gpu, &table, tf.max_importance()),
             empty,
             empty_refraction,
+            function: tf.clone(),
         });
         // Last frame's visibility was for another transfer function.
         self.last = None;
         Ok(())
+    }
+
+    /// The bricks resident in the GPU pool (the cut's bricks with data, and
+    /// whatever the pool still caches).
+    pub fn resident_bricks(&self) -> Vec<NodeKey> {
+        self.db
+            .nodes
+            .iter()
+            .map(|n| n.key)
+            .filter(|&k| self.loader.gpu_slot(k).is_some())
+            .collect()
     }
 
     pub fn tf_version(&self) -> Option<u64> {
@@ -199,12 +214,20 @@ impl Renderer {
             kernel: KernelKey {
                 mimda: cfg.mode == Mode::Mimda,
                 refraction: cfg.refraction,
+                iso: cfg.mode == Mode::Iso,
                 enhancers: self.tools.1.iter().map(Tool::enhancer).collect(),
             },
             gamma: if cfg.mode == Mode::Mimda {
                 cfg.gamma as f32
             } else {
                 0.0
+            },
+            iso: match (cfg.mode, cfg.isovalue, &self.tf) {
+                (Mode::Iso, Some(v), Some(tf)) => {
+                    let c = tf.function.eval(v).color;
+                    [v as f32, c[0] as f32, c[1] as f32, c[2] as f32]
+                }
+                _ => [0.0; 4],
             },
             tools,
         }
@@ -245,7 +268,13 @@ impl Renderer {
         } else {
             &tf.empty
         };
-        let empty = |lo: f32, hi: f32| table.is_empty(lo as f64, hi as f64);
+        // Isosurfaces: a node can hold the surface only if its range
+        // straddles the isovalue (G08 §4), whatever the transfer function.
+        let iso = (cfg.mode == Mode::Iso).then_some(cfg.isovalue).flatten();
+        let empty = |lo: f32, hi: f32| match iso {
+            Some(v) => !(lo as f64 <= v && v <= hi as f64),
+            None => table.is_empty(lo as f64, hi as f64),
+        };
         let feedback = self.last.as_ref().map(|(i, f)| (i, f.as_slice()));
         let cut = self.loader.update(views, placement, &empty, feedback);
         // A brick that fails its read or checksum is not fatal: the loader

@@ -463,6 +463,7 @@ fn every_shipped_scene_loads() {
         let key = KernelKey {
             mimda: s.render.mode == Mode::Mimda,
             refraction: s.render.refraction,
+            iso: s.render.mode == Mode::Iso,
             enhancers: s.tools.iter().map(Tool::enhancer).collect(),
         };
         assert!(all.contains(&key), "{}: {key:?}", p.display());

@@ -84,6 +84,9 @@ pub struct RenderConfig {
     /// refraction index (G10 §4).
     #[serde(default)]
     pub refraction: bool,
+    /// The surface shown with `mode = "iso"` (a data value; G08 §5.3).
+    #[serde(default)]
+    pub isovalue: Option<f64>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -218,11 +221,26 @@ impl Scene {
                 bail!("{}: {name} must be ≥ 0 (got {v})", f.display());
             }
         }
-        match r.mode {
-            Mode::Iso => bail!(
-                "{}: render.mode = \"iso\" is not available in this version (\"dvr\" or \"mimda\")",
+        match (r.mode, r.isovalue) {
+            (Mode::Iso, None) => bail!(
+                "{}: render.mode = \"iso\" needs render.isovalue (the data value of the surface)",
                 f.display()
             ),
+            (Mode::Iso, Some(v)) if !v.is_finite() => bail!(
+                "{}: render.isovalue must be a finite data value (got {v})",
+                f.display()
+            ),
+            (Mode::Iso, _) if r.refraction || r.gamma != 0.0 => bail!(
+                "{}: render.mode = \"iso\" shows a surface: render.refraction and render.gamma do not apply",
+                f.display()
+            ),
+            (Mode::Dvr | Mode::Mimda, Some(_)) => bail!(
+                "{}: render.isovalue applies to mode = \"iso\"",
+                f.display()
+            ),
+            _ => {}
+        }
+        match r.mode {
             Mode::Dvr if r.gamma != 0.0 => bail!(
                 "{}: render.gamma = {} applies to mode = \"mimda\" (G10 Eq. 3); with \"dvr\" it must be 0",
                 f.display(),

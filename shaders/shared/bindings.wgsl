@@ -39,6 +39,7 @@ struct GpuFrame {
     pool: vec4<u32>,      // slots per axis x, y, z; stored brick side B + 2·OVERLAP
     optics: vec4<f32>,    // MImDA γ, the transfer function's largest importance, 0, 0
     aux: vec4<u32>,       // (ι, ν, 0, 0) table: first entry, running-integral offset (0: none), 0, 0
+    iso: vec4<f32>,       // isovalue, the surface's linear RGB colour (mode "iso")
     tf_offsets: array<vec4<u32>, 8>,  // pyramid level offsets (32)
 }
 

@@ -177,6 +177,8 @@ pub struct RenderSettings {
     pub kernel: KernelKey,
     /// MImDA γ (G10 Eq. 3).
     pub gamma: f32,
+    /// Isovalue and surface colour (linear RGB) of the isosurface stepper.
+    pub iso: [f32; 4],
     /// The enhancers' constant parameters, in chain order.
     pub tools: [ToolParams; MAX_ENHANCERS],
 }
@@ -189,6 +191,7 @@ impl Default for RenderSettings {
             shading: false,
             kernel: KernelKey::default(),
             gamma: 0.0,
+            iso: [0.0; 4],
             tools: [ToolParams::default(); MAX_ENHANCERS],
         }
     }
@@ -785,6 +788,7 @@ impl Raycaster {
             pool: [pool.grid[0], pool.grid[1], pool.grid[2], pool.side],
             optics: [s.gamma, tf.max_importance, 0.0, 0.0],
             aux: [tf.aux_base, tf.aux_prefix, 0, 0],
+            iso: s.iso,
             tf_offsets,
         }
     }

@@ -45,6 +45,8 @@ pub struct GpuFrame {
     pub optics: [f32; 4],
     /// (ι, ν) table: first entry, running-integral offset (0: none).
     pub aux: [u32; 4],
+    /// Isovalue and the surface's linear RGB colour (mode "iso").
+    pub iso: [f32; 4],
     pub tf_offsets: [[u32; 4]; 8],
 }
 

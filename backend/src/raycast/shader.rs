@@ -44,6 +44,7 @@ pub const MODULES: &[(&str, &str)] = &[
         include_str!("../../../shaders/shared/composite.wgsl"),
     ),
     ("dvr", include_str!("../../../shaders/steppers/dvr.wgsl")),
+    ("iso", include_str!("../../../shaders/steppers/iso.wgsl")),
     (
         "mimda",
         include_str!("../../../shaders/steppers/mimda.wgsl"),
@@ -79,6 +80,9 @@ pub struct KernelKey {
     pub mimda: bool,
     /// Continuous refraction (G10 §4).
     pub refraction: bool,
+    /// Isosurface stepper (G08 §5.3): the first crossing of the isovalue,
+    /// shaded; excludes MImDA and refraction.
+    pub iso: bool,
     /// Enhancers in chain order (at most [`MAX_ENHANCERS`]).
     pub enhancers: Vec<EnhancerKind>,
 }
@@ -109,10 +113,18 @@ impl KernelKey {
                     out.push(KernelKey {
                         mimda,
                         refraction,
+                        iso: false,
                         enhancers: e.clone(),
                     });
                 }
             }
+        }
+        for e in &chains {
+            out.push(KernelKey {
+                iso: true,
+                enhancers: e.clone(),
+                ..Default::default()
+            });
         }
         out
     }
@@ -125,13 +137,22 @@ impl KernelKey {
                 self.enhancers.len()
             );
         }
+        if self.iso && (self.mimda || self.refraction) {
+            bail!("the isosurface stepper takes neither MImDA nor refraction");
+        }
         let has = |k: EnhancerKind| self.enhancers.contains(&k);
         let clip = has(EnhancerKind::ClipPlane);
         let mut s = String::new();
         let _ = writeln!(
             s,
             "// The chain of this pipeline: {} stepper, refraction {}, enhancers {:?}.",
-            if self.mimda { "MImDA" } else { "DVR" },
+            if self.iso {
+                "isosurface"
+            } else if self.mimda {
+                "MImDA"
+            } else {
+                "DVR"
+            },
             if self.refraction { "on" } else { "off" },
             self.enhancers
         );
@@ -141,6 +162,8 @@ impl KernelKey {
         } else {
             "#import dvr\n"
         });
+        s.push_str("#import iso\n");
+        let _ = writeln!(s, "const ISO: bool = {};", self.iso);
         let _ = writeln!(s, "const HAS_BREAKS: bool = {clip};");
         let _ = writeln!(s, "const MODIFIES_OPTICS: bool = {clip};");
         let _ = writeln!(
@@ -261,8 +284,9 @@ mod tests {
     #[test]
     fn every_kernel_combination_validates_without_a_gpu() {
         let keys = KernelKey::all();
-        // DVR/MImDA × refraction off/on × chains of 0–3 of 3 kinds.
-        assert_eq!(keys.len(), 2 * 2 * (1 + 3 + 9 + 27));
+        // (DVR/MImDA × refraction off/on, and the isosurface) × chains of
+        // 0–3 of 3 kinds.
+        assert_eq!(keys.len(), (2 * 2 + 1) * (1 + 3 + 9 + 27));
         for key in &keys {
             let what = format!("{key:?}");
             let src = kernel(key).unwrap();
@@ -385,7 +409,7 @@ mod tests {
             GpuFrame,
             [
                 rt0, rt1, rt2, center, extent, domain, spacing, tf, render, light, counts, pool,
-                optics, aux, tf_offsets
+                optics, aux, iso, tf_offsets
             ]
         );
         check!("IndexNode", IndexNode, [tree, data, range, nx, ny, nz]);
