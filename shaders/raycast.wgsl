@@ -31,15 +31,23 @@ override SHADING: bool = false;
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let view = views[gid.z];
-    if (gid.x >= view.size.x || gid.y >= view.size.y) {
+    // size.w = 0: every pixel; 1 + k: only quincunx sub-frame k (frame
+    // reconstruction, G10 §5), one pixel of each 2×2 quad at its offset.
+    var px = gid.xy;
+    if (view.size.w != 0u) {
+        let k = view.size.w - 1u;
+        let off = vec2<u32>(select(0u, 1u, k == 1u || k == 2u), select(0u, 1u, k == 1u || k == 3u));
+        px = gid.xy * 2u + off;
+    }
+    if (px.x >= view.size.x || px.y >= view.size.y) {
         return;
     }
-    let out = view.size.z + gid.y * view.size.x + gid.x;
+    let out = view.size.z + px.y * view.size.x + px.x;
 
     // G10 Eq. 1: the ray of screen point Q for projector E and observer V.
     let q = vec3<f32>(
-        view.region.x + (f32(gid.x) + 0.5) / f32(view.size.x) * view.region.z,
-        view.region.y + view.region.w - (f32(gid.y) + 0.5) / f32(view.size.y) * view.region.w,
+        view.region.x + (f32(px.x) + 0.5) / f32(view.size.x) * view.region.z,
+        view.region.y + view.region.w - (f32(px.y) + 0.5) / f32(view.size.y) * view.region.w,
         0.0);
     let e = view.eye.xyz;
     let v = view.observer.xyz;

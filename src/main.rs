@@ -147,6 +147,10 @@ enum Command {
         /// Quantisation of the bricks for --codecs: u8 | u16 | none.
         #[arg(long, default_value = "u8")]
         quantize: String,
+        /// Only frame reconstruction against full rendering on a rotation of
+        /// 1° per frame, this many frames (DIR/reconstruction.csv).
+        #[arg(long)]
+        reconstruction: Option<usize>,
     },
     /// Transfer functions: import ParaView and 3D Slicer presets.
     Tf {
@@ -405,6 +409,7 @@ fn run(cli: Cli) -> Result<()> {
             kernels_only,
             codecs,
             quantize,
+            reconstruction,
         } => {
             if !codecs.is_empty() {
                 let encoding = BrickEncoding::parse(&quantize).with_context(|| {
@@ -432,6 +437,40 @@ fn run(cli: Cli) -> Result<()> {
                 .split_once('x')
                 .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
                 .with_context(|| format!("--size '{size}': expected WxH, e.g. 160x120"))?;
+            if let Some(frames) = reconstruction {
+                let tf = parallax_common::tf::TransferFunction::load(&tf)?;
+                let tmp = tempfile::tempdir()?;
+                let db = tmp.path().join("bench.pxo");
+                let mut src = data::open(&volume, None)?;
+                store::import(
+                    src.as_mut(),
+                    &db,
+                    &volume.display().to_string(),
+                    &ImportOptions::default(),
+                )?;
+                let placement = parallax_common::camera::Placement {
+                    center: [0.0, 0.0, 0.0],
+                    rotation_deg: [-90.0, 180.0, 0.0],
+                    size: 0.25,
+                };
+                let view =
+                    parallax_common::camera::View::window([w, h], [0.4, 0.3], [0.0, 0.0, 0.8]);
+                let pts = parallax_backend::bench::run_reconstruction(
+                    &db, &tf, placement, view, frames, &out,
+                )?;
+                let full: f64 = pts.iter().map(|p| p.full_ms).sum();
+                let rec: f64 = pts.iter().map(|p| p.reconstructed_ms).sum();
+                let mean = pts.iter().map(|p| p.psnr_db).sum::<f64>() / pts.len().max(1) as f64;
+                let worst = pts.iter().map(|p| p.psnr_db).fold(f64::INFINITY, f64::min);
+                println!(
+                    "{frames} frames, {w}×{h}, 1° per frame: full {:.1} ms/frame, reconstructed {:.1} ms/frame: speed-up {:.2}×; PSNR against full mean {mean:.1} dB, worst {worst:.1} dB",
+                    full / frames as f64,
+                    rec / frames as f64,
+                    full / rec
+                );
+                println!("wrote {}/reconstruction.csv", out.display());
+                return Ok(());
+            }
             let mut src = data::open(&volume, None)?;
             let vol = parallax_backend::volume::Volume::read_all(src.as_mut())?;
             let tf = parallax_common::tf::TransferFunction::load(&tf)?;

@@ -554,3 +554,58 @@ fn three_clip_planes_and_mimda_render_identically_in_the_cluster() {
         assert_ne!(npy(&cluster, 3, id), npy(&plain, 3, id), "{id}");
     }
 }
+
+/// Frame reconstruction (G10 §5) per projector in the cluster: the same
+/// images as embedded, and on a static view, once the cut has settled, the
+/// full render bit for bit.
+#[test]
+fn frame_reconstruction_in_the_cluster() {
+    let w = World::new();
+    let scene = w.path("scene-recon.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("scene.toml"))
+            .unwrap()
+            .replace("[render]\n", "[render]\nreconstruction = true\n"),
+    )
+    .unwrap();
+    let args = |out: &Path, scene: &Path| -> Vec<String> {
+        let mut a: Vec<String> = w
+            .render_args(out, scene)
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        a[4] = "16".into(); // --frames 16
+        a
+    };
+    let cluster = w.path("recon-cluster");
+    let a = args(&cluster, &scene);
+    let o = mpirun(3, &a.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    let embedded = w.path("recon-embedded");
+    let mut a = args(&embedded, &scene);
+    a.extend(["--backends".into(), "2".into()]);
+    let o = run(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", text(&o));
+    let full = w.path("recon-full");
+    let a = args(&full, &w.path("scene.toml"));
+    let o = run(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", text(&o));
+    for id in ["p00", "p01", "p02", "p03"] {
+        for frame in [0, 1, 15] {
+            assert_eq!(
+                npy(&cluster, frame, id),
+                npy(&embedded, frame, id),
+                "projector {id}, frame {frame}"
+            );
+        }
+        assert!(
+            (1..8).any(|f| npy(&cluster, f, id) != npy(&full, f, id)),
+            "{id}: while the cut refines, frames are reconstructed, not full"
+        );
+        assert!(
+            npy(&cluster, 15, id) == npy(&full, 15, id),
+            "{id}: frame 15 is the full render"
+        );
+    }
+}

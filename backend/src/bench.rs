@@ -582,3 +582,73 @@ fn bytes_per(encoding: BrickEncoding) -> usize {
         BrickEncoding::F32 => 4,
     }
 }
+
+/// One frame of the reconstruction benchmark.
+#[derive(Clone, Debug)]
+pub struct ReconstructionPoint {
+    pub frame: usize,
+    pub full_ms: f64,
+    pub reconstructed_ms: f64,
+    pub psnr_db: f64,
+}
+
+/// Adaptive frame reconstruction (G10 §5) against full rendering on a
+/// rotation of 1° per frame: both renderers converge their cut on the first
+/// view, then render `frames` frames (loads waited for, so both see the same
+/// cut); the frame time of each and the PSNR of the reconstructed frame
+/// against the full one. Writes `reconstruction.csv` in `out`.
+pub fn run_reconstruction(
+    db: &Path,
+    tf: &TransferFunction,
+    placement: Placement,
+    view: View,
+    frames: usize,
+    out: &Path,
+) -> Result<Vec<ReconstructionPoint>> {
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let full_cfg = RenderConfig {
+        shading: Shading::Phong,
+        ..RenderConfig::default()
+    };
+    let rec_cfg = RenderConfig {
+        reconstruction: true,
+        ..full_cfg.clone()
+    };
+    let mut full = Renderer::new(db, &full_cfg)?;
+    let mut rec = Renderer::new(db, &rec_cfg)?;
+    full.set_transfer_function(1, tf)?;
+    rec.set_transfer_function(1, tf)?;
+    full.converge(&placement, &[view], &full_cfg, 40)?;
+    rec.converge(&placement, &[view], &full_cfg, 40)?;
+    full.sync_io = true;
+    rec.sync_io = true;
+    let mut points = Vec::new();
+    for f in 0..frames {
+        let mut p = placement;
+        p.rotation_deg[1] += f as f64;
+        let t = Instant::now();
+        let a = full.frame(f as u64, &p, &[view], &full_cfg)?;
+        let full_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let b = rec.frame(f as u64, &p, &[view], &rec_cfg)?;
+        let reconstructed_ms = t.elapsed().as_secs_f64() * 1e3;
+        let reference: Vec<[f64; 4]> = a.images[0].iter().map(|p| p.map(|v| v as f64)).collect();
+        points.push(ReconstructionPoint {
+            frame: f,
+            full_ms,
+            reconstructed_ms,
+            psnr_db: image_error(&b.images[0], &reference).2,
+        });
+    }
+    let mut f = AtomicFile::create(&out.join("reconstruction.csv"))?;
+    writeln!(f, "frame,full_ms,reconstructed_ms,psnr_db")?;
+    for p in &points {
+        writeln!(
+            f,
+            "{},{:.3},{:.3},{:.2}",
+            p.frame, p.full_ms, p.reconstructed_ms, p.psnr_db
+        )?;
+    }
+    f.commit()?;
+    Ok(points)
+}

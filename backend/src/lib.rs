@@ -11,6 +11,7 @@ pub mod node;
 pub mod output;
 pub mod quilt;
 pub mod raycast;
+pub mod reconstruct;
 pub mod reference;
 pub mod render;
 pub mod simulate;

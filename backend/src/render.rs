@@ -9,6 +9,7 @@ use crate::raycast::{
     BrickPool, Filtering, KernelKey, Raycaster, RenderInputs, RenderSettings, SceneGeometry,
     TfTable, ToolParams,
 };
+use crate::reconstruct::{subframe_of, ViewHistory, SUBFRAMES};
 use crate::store::{BrickEncoding, NodeKey, OctreeDb};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
@@ -16,6 +17,7 @@ use parallax_common::config::{Interpolation, Mode, RenderConfig, Shading};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::tools::{Tool, MAX_ENHANCERS};
+use std::collections::VecDeque;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
@@ -40,7 +42,13 @@ pub struct Renderer {
     loader: Loader,
     db: Arc<OctreeDb>,
     tf: Option<ActiveTf>,
-    last: Option<(SpatialIndex, Vec<u32>)>,
+    /// Recent frames' index and visibility feedback, newest last: one frame
+    /// (G10 §5), or one per sub-frame with frame reconstruction.
+    last: VecDeque<(SpatialIndex, Vec<u32>)>,
+    /// Frame reconstruction: each view's history, and what it was made
+    /// under (a change of any of it invalidates the history).
+    history: Vec<ViewHistory>,
+    history_key: Option<HistoryKey>,
     /// The tools (each an enhancer of the chain) and their version.
     tools: (u64, Vec<Tool>),
     /// Wait for every posted read before refining (deterministic frames).
@@ -110,7 +118,9 @@ impl Renderer {
             loader,
             db,
             tf: None,
-            last: None,
+            last: VecDeque::new(),
+            history: Vec::new(),
+            history_key: None,
             tools: (0, Vec::new()),
             sync_io: false,
         })
@@ -148,7 +158,7 @@ impl Renderer {
             function: tf.clone(),
         });
         // Last frame's visibility was for another transfer function.
-        self.last = None;
+        self.last.clear();
         Ok(())
     }
 
@@ -229,6 +239,7 @@ impl Renderer {
                 }
                 _ => [0.0; 4],
             },
+            subframe: None,
             tools,
         }
     }
@@ -275,8 +286,24 @@ impl Renderer {
             Some(v) => !(lo as f64 <= v && v <= hi as f64),
             None => table.is_empty(lo as f64, hi as f64),
         };
-        let feedback = self.last.as_ref().map(|(i, f)| (i, f.as_slice()));
-        let cut = self.loader.update(views, placement, &empty, feedback);
+        // With reconstruction, a node is invisible only if the last four
+        // sub-frames all missed it.
+        let keep = if cfg.reconstruction {
+            SUBFRAMES as usize
+        } else {
+            1
+        };
+        while self.last.len() > keep {
+            self.last.pop_front();
+        }
+        let feedbacks: Vec<(&SpatialIndex, &[u32])> = if self.last.len() == keep {
+            self.last.iter().map(|(i, f)| (i, f.as_slice())).collect()
+        } else {
+            Vec::new()
+        };
+        let cut = self
+            .loader
+            .update_with_feedbacks(views, placement, &empty, &feedbacks);
         // A brick that fails its read or checksum is not fatal: the loader
         // never asks for it again and its parent stays a leaf (G08 §4 never
         // blocks on data); the frame names it.
@@ -309,7 +336,10 @@ impl Renderer {
         stats.index_ms = ms(t);
 
         let scene = self.geometry(placement);
-        let settings = self.settings(placement, cfg);
+        let mut settings = self.settings(placement, cfg);
+        if cfg.reconstruction {
+            settings.subframe = Some(subframe_of(frame));
+        }
         let t = Instant::now();
         let out = self.raycaster.render(
             &self.gpu,
@@ -339,12 +369,55 @@ impl Renderer {
         stats.cpu_bytes = c.cpu_bytes;
         stats.adequate = c.adequate && c.requested == 0 && self.loader.in_flight() == 0;
         stats.held_back = c.held_back.iter().copied().collect();
-        self.last = Some((index, out.feedback));
+        self.last.push_back((index, out.feedback));
+        let images = if cfg.reconstruction {
+            let t = Instant::now();
+            let images = self.reconstruct(frame, placement, views, cfg, out.images);
+            stats.output_ms += ms(t);
+            images
+        } else {
+            self.history.clear();
+            self.history_key = None;
+            out.images
+        };
         stats.total_ms = ms(start);
-        Ok(Frame {
-            images: out.images,
-            stats,
-        })
+        Ok(Frame { images, stats })
+    }
+
+    /// Frame reconstruction (G10 §5): the rendered sub-frame into each
+    /// view's history, the rest filtered. The history is dropped when the
+    /// views, the render settings, the transfer function or the tools
+    /// change, or the placement jumps.
+    fn reconstruct(
+        &mut self,
+        frame: u64,
+        placement: &Placement,
+        views: &[View],
+        cfg: &RenderConfig,
+        rendered: Vec<Vec<[f32; 4]>>,
+    ) -> Vec<Vec<[f32; 4]>> {
+        let key = HistoryKey {
+            views: views.to_vec(),
+            cfg: cfg.clone(),
+            tf: self.tf_version(),
+            tools: self.tools.0,
+            placement: *placement,
+        };
+        let valid = self.history_key.as_ref().is_some_and(|k| k.continues(&key))
+            && self.history.len() == views.len();
+        if !valid {
+            self.history = views
+                .iter()
+                .map(|v| ViewHistory::new(v.resolution[0], v.resolution[1]))
+                .collect();
+        }
+        self.history_key = Some(key);
+        let k = subframe_of(frame);
+        self.history
+            .iter_mut()
+            .zip(rendered)
+            .map(|(h, img)| h.update(k, &img))
+            .collect()
     }
 
     /// Renders until the cut stops changing (every leaf adequate, nothing
@@ -373,4 +446,39 @@ impl Renderer {
 
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
+}
+
+/// What a view's reconstruction history was made under.
+struct HistoryKey {
+    views: Vec<View>,
+    cfg: RenderConfig,
+    tf: Option<u64>,
+    tools: u64,
+    placement: Placement,
+}
+
+impl HistoryKey {
+    /// Largest change of the placement from one frame to the next that the
+    /// filter follows as motion; more is a jump and restarts the history.
+    const MAX_TURN_DEG: f64 = 10.0;
+    const MAX_SHIFT: f64 = 0.1;
+
+    /// Whether `next` continues this history: same views, settings,
+    /// transfer function and tools, and a placement that moved, not jumped.
+    fn continues(&self, next: &HistoryKey) -> bool {
+        let (a, b) = (&self.placement, &next.placement);
+        let turn = (0..3)
+            .map(|i| (a.rotation_deg[i] - b.rotation_deg[i]).abs())
+            .fold(0.0, f64::max);
+        let shift = (0..3)
+            .map(|i| (a.center[i] - b.center[i]).abs())
+            .fold(0.0, f64::max);
+        self.views == next.views
+            && self.cfg == next.cfg
+            && self.tf == next.tf
+            && self.tools == next.tools
+            && turn <= Self::MAX_TURN_DEG
+            && shift <= Self::MAX_SHIFT * a.size
+            && (b.size / a.size - 1.0).abs() <= Self::MAX_SHIFT
+    }
 }

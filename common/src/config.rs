@@ -87,6 +87,10 @@ pub struct RenderConfig {
     /// The surface shown with `mode = "iso"` (a data value; G08 §5.3).
     #[serde(default)]
     pub isovalue: Option<f64>,
+    /// Adaptive frame reconstruction (G10 §5): one quincunx sub-frame of
+    /// each view rendered per frame, the others reconstructed.
+    #[serde(default)]
+    pub reconstruction: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

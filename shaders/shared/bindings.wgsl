@@ -21,7 +21,7 @@ struct GpuView {
     region: vec4<f32>,    // x0, y0, w, h (m) on the screen plane
     eye: vec4<f32>,       // projector / eye E (m); w = η
     observer: vec4<f32>,  // observer V (m)
-    size: vec4<u32>,      // W, H, first pixel of this view in `image`, 0
+    size: vec4<u32>,      // W, H, first pixel of this view in `image`, sub-frame (0: all pixels, 1 + k: quincunx sub-frame k)
 }
 
 struct GpuFrame {

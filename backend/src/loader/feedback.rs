@@ -28,6 +28,19 @@ impl Visibility {
         Self::default()
     }
 
+    /// Several frames' feedback: invisible where every frame found it so.
+    pub fn from_feedbacks(frames: &[(&SpatialIndex, &[u32])]) -> Self {
+        let mut it = frames.iter().map(|(i, f)| Self::from_feedback(i, f));
+        let Some(mut v) = it.next() else {
+            return Self::none();
+        };
+        for other in it {
+            v.invisible.retain(|k| other.invisible.contains(k));
+            v.visible = v.visible.max(other.visible);
+        }
+        v
+    }
+
     /// `feedback[i]` belongs to index node i; entries beyond the index are
     /// ignored and missing entries count as zero.
     pub fn from_feedback(index: &SpatialIndex, feedback: &[u32]) -> Self {

@@ -283,12 +283,26 @@ impl Loader {
         empty: &dyn Fn(f32, f32) -> bool,
         feedback: Option<(&SpatialIndex, &[u32])>,
     ) -> FrameCut {
+        let list: Vec<(&SpatialIndex, &[u32])> = feedback.into_iter().collect();
+        self.update_with_feedbacks(views, placement, empty, &list)
+    }
+
+    /// [`Loader::update`] with the feedback of several recent frames: a node
+    /// is invisible only if every one of them says so (frame reconstruction
+    /// renders a quarter of the pixels each frame, so one frame's feedback
+    /// alone would miss what the other sub-frames see).
+    pub fn update_with_feedbacks(
+        &mut self,
+        views: &[View],
+        placement: &Placement,
+        empty: &dyn Fn(f32, f32) -> bool,
+        feedbacks: &[(&SpatialIndex, &[u32])],
+    ) -> FrameCut {
         self.drain();
-        let vis = match feedback {
-            Some((index, words)) if self.cfg.use_feedback => {
-                Visibility::from_feedback(index, words)
-            }
-            _ => Visibility::none(),
+        let vis = if self.cfg.use_feedback && !feedbacks.is_empty() {
+            Visibility::from_feedbacks(feedbacks)
+        } else {
+            Visibility::none()
         };
         let frame =
             FrameGeometry::new(&self.geom, views, placement).with_lightfield(self.lightfield);

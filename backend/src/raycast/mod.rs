@@ -179,6 +179,8 @@ pub struct RenderSettings {
     pub gamma: f32,
     /// Isovalue and surface colour (linear RGB) of the isosurface stepper.
     pub iso: [f32; 4],
+    /// Render only this quincunx sub-frame (frame reconstruction, G10 §5).
+    pub subframe: Option<u32>,
     /// The enhancers' constant parameters, in chain order.
     pub tools: [ToolParams; MAX_ENHANCERS],
 }
@@ -192,6 +194,7 @@ impl Default for RenderSettings {
             kernel: KernelKey::default(),
             gamma: 0.0,
             iso: [0.0; 4],
+            subframe: None,
             tools: [ToolParams::default(); MAX_ENHANCERS],
         }
     }
@@ -587,7 +590,7 @@ impl Raycaster {
                     v.observer[2] as f32,
                     0.0,
                 ],
-                size: [w, h, pixels as u32, 0],
+                size: [w, h, pixels as u32, settings.subframe.map_or(0, |k| k + 1)],
             });
             pixels += w as u64 * h as u64;
             if pixels > MAX_FRAME_PIXELS {
@@ -684,7 +687,12 @@ impl Raycaster {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, bind, &[]);
-            pass.dispatch_workgroups(max_w.div_ceil(8), max_h.div_ceil(8), views.len() as u32);
+            // A sub-frame has one pixel of every 2×2 quad.
+            let (gw, gh) = match settings.subframe {
+                Some(_) => (max_w.div_ceil(2), max_h.div_ceil(2)),
+                None => (max_w, max_h),
+            };
+            pass.dispatch_workgroups(gw.div_ceil(8), gh.div_ceil(8), views.len() as u32);
         }
         enc.copy_buffer_to_buffer(&fr.image.buffer, 0, &fr.readback.buffer, 0, img_size);
         enc.copy_buffer_to_buffer(
