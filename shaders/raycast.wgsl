@@ -67,10 +67,36 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     var acc = Acc(vec3<f32>(0.0), 0.0, 0.0);
     var span = clip_box(o, d, frame.extent.xyz);
+    let predicting = ISO && frame.predict.x > 0.0;
     if (span.y <= span.x) {
         image[out] = vec4<f32>(0.0);
+        if (predicting) {
+            prediction[out] = PB_MISS_BOX;
+        }
         return;
     }
+    // The prediction buffer (B10 §4): a ray that hit the surface last frame
+    // starts a window before that distance (local traversal), one that
+    // missed it steps sparsely (sparse traversal); both step by the voxel
+    // size / κ, κ from the brick's variance (§4.5). No information, or a
+    // full-traversal frame: the normal march.
+    var sparse = false;
+    let entry = span.x;
+    // Local traversal starts at the entry of the octree node that holds the
+    // point a window before the last hit: in that node and after it the
+    // samples fall where a full traversal's would.
+    var snap = false;
+    if (predicting && frame.predict.x > 1.5) {
+        let pv = prediction[out];
+        if (pv >= 0.0) {
+            span.x = max(span.x, pv - frame.predict.y);
+            snap = true;
+            sparse = true;
+        } else if (pv == PB_MISS_SURFACE || pv == PB_MISS_BOX) {
+            sparse = true;
+        }
+    }
+    var hit_t = -1.0;
     var ray: Ray;
     ray.origin = o;
     ray.dir = d;
@@ -106,6 +132,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         } else if (tx.z <= tx.x && tx.z <= tx.y) {
             axis = 2u;
         }
+        if (snap) {
+            let te = select((hi - o) * inv_d, (lo - o) * inv_d, d > vec3<f32>(0.0));
+            let te_m = select(te, vec3<f32>(-3.0e38), abs(d) < vec3<f32>(1e-30));
+            t = clamp(max(max(te_m.x, te_m.y), te_m.z), entry, t);
+            snap = false;
+        }
         let last = t_exit >= span.y;
         t_exit = clamp(t_exit, t, span.y);
 
@@ -114,7 +146,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (slot != NO_SLOT && t_exit > t) {
             let leaf = Leaf(node, level, cell, slot);
             // Sampling rate matched to the leaf's level.
-            let h = step_factor * frame.spacing.w * f32(1u << (frame.counts.y - level));
+            let voxel = frame.spacing.w * f32(1u << (frame.counts.y - level));
+            var h = step_factor * voxel;
+            if (sparse) {
+                h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slot_range[slot].z));
+            }
             if (!have_prev) {
                 s_prev = sample_brick(leaf, o + d * t);
                 have_prev = true;
@@ -158,6 +194,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                                 }
                             }
                             over(&acc, vec4<f32>(max(smp.emission, vec3<f32>(0.0)) * shade * a, a));
+                            if (hit_t < 0.0) {
+                                hit_t = th;
+                            }
                         }
                     }
                     s_prev = s;
@@ -283,4 +322,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     ray.dir = d;
     chain_end(&ray, &acc);
     image[out] = vec4<f32>(acc.color, acc.alpha);
+    if (predicting) {
+        prediction[out] = select(PB_MISS_SURFACE, hit_t, hit_t >= 0.0);
+    }
 }

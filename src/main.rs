@@ -151,6 +151,14 @@ enum Command {
         /// 1° per frame, this many frames (DIR/reconstruction.csv).
         #[arg(long)]
         reconstruction: Option<usize>,
+        /// Only the isosurface prediction buffer against full traversal on a
+        /// rotation of 1° per frame, this many frames per κ
+        /// (DIR/prediction.csv).
+        #[arg(long)]
+        prediction: Option<usize>,
+        /// The isovalue of --prediction.
+        #[arg(long, default_value_t = 80.0)]
+        isovalue: f64,
     },
     /// Transfer functions: import ParaView and 3D Slicer presets.
     Tf {
@@ -410,6 +418,8 @@ fn run(cli: Cli) -> Result<()> {
             codecs,
             quantize,
             reconstruction,
+            prediction,
+            isovalue,
         } => {
             if !codecs.is_empty() {
                 let encoding = BrickEncoding::parse(&quantize).with_context(|| {
@@ -437,6 +447,55 @@ fn run(cli: Cli) -> Result<()> {
                 .split_once('x')
                 .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
                 .with_context(|| format!("--size '{size}': expected WxH, e.g. 160x120"))?;
+            if let Some(frames) = prediction {
+                let tf = parallax_common::tf::TransferFunction::load(&tf)?;
+                let tmp = tempfile::tempdir()?;
+                let db = tmp.path().join("bench.pxo");
+                let mut src = data::open(&volume, None)?;
+                store::import(
+                    src.as_mut(),
+                    &db,
+                    &volume.display().to_string(),
+                    &ImportOptions::default(),
+                )?;
+                let placement = parallax_common::camera::Placement {
+                    center: [0.0, 0.0, 0.0],
+                    rotation_deg: [-90.0, 180.0, 0.0],
+                    size: 0.25,
+                };
+                let view =
+                    parallax_common::camera::View::window([w, h], [0.4, 0.3], [0.0, 0.0, 0.8]);
+                let kappas = [[0.1, 0.3], [0.2, 0.6], [0.5, 1.0], [1.0, 2.0], [2.0, 2.0]];
+                let pts = parallax_backend::bench::run_prediction(
+                    &db, &tf, isovalue, placement, view, frames, &kappas, &out,
+                )?;
+                println!("{frames} frames per κ, {w}×{h}, isovalue {isovalue}, 1° per frame:");
+                for k in kappas {
+                    let q: Vec<_> = pts.iter().filter(|p| p.kappa == k).collect();
+                    let full: f64 = q.iter().map(|p| p.full_ms).sum();
+                    let pred: f64 = q.iter().map(|p| p.predicted_ms).sum();
+                    let steered: Vec<_> = q.iter().filter(|p| p.predicted).collect();
+                    let mean_diff = steered.iter().map(|p| p.differing).sum::<f64>()
+                        / steered.len().max(1) as f64;
+                    let worst = steered.iter().map(|p| p.differing).fold(0.0, f64::max);
+                    let psnr = steered.iter().map(|p| p.psnr_db).sum::<f64>()
+                        / steered.len().max(1) as f64;
+                    let fulls = q.iter().filter(|p| !p.predicted).count();
+                    let exact = q.iter().filter(|p| !p.predicted && p.identical).count();
+                    println!(
+                        "  κ {:?}: full traversal {:.1} ms/frame, prediction buffer {:.1} ms/frame: speed-up {:.2}×; \
+                         pixels differing by over 1/255 {:.2} % mean, {:.2} % worst, PSNR {psnr:.1} dB; periodic full traversals equal to full: {exact} of {fulls}",
+                        k,
+                        full / q.len() as f64,
+                        pred / q.len() as f64,
+                        full / pred,
+                        100.0 * mean_diff,
+                        100.0 * worst
+                    );
+                }
+                println!("wrote {}/prediction.csv", out.display());
+                return Ok(());
+            }
             if let Some(frames) = reconstruction {
                 let tf = parallax_common::tf::TransferFunction::load(&tf)?;
                 let tmp = tempfile::tempdir()?;

@@ -652,3 +652,115 @@ pub fn run_reconstruction(
     f.commit()?;
     Ok(points)
 }
+
+/// One frame of the prediction-buffer benchmark.
+#[derive(Clone, Debug)]
+pub struct PredictionPoint {
+    pub kappa: [f64; 2],
+    pub frame: usize,
+    pub full_ms: f64,
+    pub predicted_ms: f64,
+    /// The prediction buffer steered this frame (else a full traversal).
+    pub predicted: bool,
+    /// Pixels whose colour or opacity differs by more than 1/255 from the
+    /// full traversal's.
+    pub differing: f64,
+    /// The image equals the full traversal's bit for bit.
+    pub identical: bool,
+    /// PSNR against the full traversal (dB).
+    pub psnr_db: f64,
+}
+
+/// The prediction buffer (B10 §4) against full traversal on an isosurface
+/// turned 1° per frame, for each κ pair; both renderers first converge their
+/// cut. Writes `prediction.csv` in `out`.
+#[allow(clippy::too_many_arguments)]
+pub fn run_prediction(
+    db: &Path,
+    tf: &TransferFunction,
+    isovalue: f64,
+    placement: Placement,
+    view: View,
+    frames: usize,
+    kappas: &[[f64; 2]],
+    out: &Path,
+) -> Result<Vec<PredictionPoint>> {
+    use parallax_common::config::Mode;
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    // Visibility feedback off in both, so that both render the same cut
+    // and differences come from the traversal alone.
+    let full_cfg = RenderConfig {
+        mode: Mode::Iso,
+        isovalue: Some(isovalue),
+        shading: Shading::Phong,
+        visibility_feedback: false,
+        ..RenderConfig::default()
+    };
+    let mut full = Renderer::new(db, &full_cfg)?;
+    full.set_transfer_function(1, tf)?;
+    full.converge(&placement, &[view], &full_cfg, 40)?;
+    full.sync_io = true;
+    let mut points = Vec::new();
+    for &kappa in kappas {
+        let cfg = RenderConfig {
+            prediction: true,
+            kappa,
+            ..full_cfg.clone()
+        };
+        let mut pb = Renderer::new(db, &cfg)?;
+        pb.set_transfer_function(1, tf)?;
+        pb.converge(&placement, &[view], &full_cfg, 40)?;
+        pb.sync_io = true;
+        for f in 0..frames {
+            let mut p = placement;
+            p.rotation_deg[1] += f as f64;
+            let t = Instant::now();
+            let a = full.frame(f as u64, &p, &[view], &full_cfg)?;
+            let full_ms = t.elapsed().as_secs_f64() * 1e3;
+            let t = Instant::now();
+            let b = pb.frame(f as u64, &p, &[view], &cfg)?;
+            let predicted_ms = t.elapsed().as_secs_f64() * 1e3;
+            let (x, y) = (&a.images[0], &b.images[0]);
+            let differ = x
+                .iter()
+                .zip(y)
+                .filter(|(p, q)| (0..4).any(|c| (p[c] - q[c]).abs() > 1.0 / 255.0))
+                .count();
+            points.push(PredictionPoint {
+                kappa,
+                frame: f,
+                full_ms,
+                predicted_ms,
+                predicted: b.predicted,
+                differing: differ as f64 / x.len().max(1) as f64,
+                identical: x == y,
+                psnr_db: {
+                    let r: Vec<[f64; 4]> = x.iter().map(|p| p.map(|v| v as f64)).collect();
+                    image_error(y, &r).2
+                },
+            });
+        }
+    }
+    let mut f = AtomicFile::create(&out.join("prediction.csv"))?;
+    writeln!(
+        f,
+        "kappa_low,kappa_high,frame,full_ms,predicted_ms,predicted,differing_fraction,identical,psnr_db"
+    )?;
+    for p in &points {
+        writeln!(
+            f,
+            "{},{},{},{:.3},{:.3},{},{:.6},{},{:.2}",
+            p.kappa[0],
+            p.kappa[1],
+            p.frame,
+            p.full_ms,
+            p.predicted_ms,
+            p.predicted,
+            p.differing,
+            p.identical,
+            p.psnr_db
+        )?;
+    }
+    f.commit()?;
+    Ok(points)
+}

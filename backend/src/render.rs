@@ -49,6 +49,11 @@ pub struct Renderer {
     /// under (a change of any of it invalidates the history).
     history: Vec<ViewHistory>,
     history_key: Option<HistoryKey>,
+    /// The stored bricks' smallest and largest variance (B10 §4.5).
+    variance_range: (f32, f32),
+    /// Prediction buffer: what it was filled under, and frames since the
+    /// last full traversal.
+    prediction: Option<(HistoryKey, u32)>,
     /// The tools (each an enhancer of the chain) and their version.
     tools: (u64, Vec<Tool>),
     /// Wait for every posted read before refining (deterministic frames).
@@ -59,6 +64,9 @@ pub struct Renderer {
 pub struct Frame {
     pub images: Vec<Vec<[f32; 4]>>,
     pub stats: FrameStats,
+    /// Isosurfaces: the prediction buffer steered this frame (not a full
+    /// traversal).
+    pub predicted: bool,
 }
 
 impl Renderer {
@@ -99,6 +107,13 @@ impl Renderer {
                 (min_bricks as f64 * brick_mib * 100.0).ceil() / 100.0
             );
         }
+        let variance_range = db
+            .nodes
+            .iter()
+            .filter(|n| n.is_stored() && n.variance.is_finite())
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), n| {
+                (lo.min(n.variance), hi.max(n.variance))
+            });
         let pool = BrickPool::new(&gpu, slots, side, float)?;
         let loader = Loader::new(
             db.clone(),
@@ -121,6 +136,8 @@ impl Renderer {
             last: VecDeque::new(),
             history: Vec::new(),
             history_key: None,
+            variance_range,
+            prediction: None,
             tools: (0, Vec::new()),
             sync_io: false,
         })
@@ -240,6 +257,7 @@ impl Renderer {
                 _ => [0.0; 4],
             },
             subframe: None,
+            predict: [0.0; 4],
             tools,
         }
     }
@@ -325,8 +343,15 @@ impl Renderer {
         stats.refine_ms = ms(t);
 
         let t = Instant::now();
+        let (v_lo, v_hi) = self.variance_range;
         for u in &cut.uploads {
-            self.pool.upload(&self.gpu, u.slot, &u.data);
+            let v = self.db.node(u.key).map_or(0.0, |n| n.variance);
+            let norm = if v_hi > v_lo {
+                (v - v_lo) / (v_hi - v_lo)
+            } else {
+                0.0
+            };
+            self.pool.upload(&self.gpu, u.slot, &u.data, norm);
         }
         stats.upload_ms = ms(t);
 
@@ -339,6 +364,38 @@ impl Renderer {
         let mut settings = self.settings(placement, cfg);
         if cfg.reconstruction {
             settings.subframe = Some(subframe_of(frame));
+        }
+        // The prediction buffer (B10 §4): a full traversal when its
+        // contents do not belong to this view, and every α frames.
+        let mut pb_next = None;
+        if cfg.mode == Mode::Iso && cfg.prediction {
+            let key = HistoryKey {
+                views: views.to_vec(),
+                cfg: cfg.clone(),
+                tf: None,
+                tools: self.tools.0,
+                placement: *placement,
+            };
+            let since = match &self.prediction {
+                Some((k, c)) if k.continues(&key) && c + 1 < cfg.full_traversal_every => c + 1,
+                _ => 0,
+            };
+            let window = PREDICTION_WINDOW_VOXELS
+                * self
+                    .db
+                    .header
+                    .info
+                    .spacing
+                    .iter()
+                    .cloned()
+                    .fold(f64::INFINITY, f64::min);
+            settings.predict = [
+                if since == 0 { 1.0 } else { 2.0 },
+                window as f32,
+                cfg.kappa[0] as f32,
+                cfg.kappa[1] as f32,
+            ];
+            pb_next = Some((key, since));
         }
         let t = Instant::now();
         let out = self.raycaster.render(
@@ -369,7 +426,14 @@ impl Renderer {
         stats.cpu_bytes = c.cpu_bytes;
         stats.adequate = c.adequate && c.requested == 0 && self.loader.in_flight() == 0;
         stats.held_back = c.held_back.iter().copied().collect();
-        self.last.push_back((index, out.feedback));
+        let predicted = settings.predict[0] > 1.5 && !out.prediction_reset;
+        // A predicted frame's rays skip what lies before their last hit, so
+        // its feedback under-reports: the loader keeps the last full
+        // traversal's.
+        if !predicted {
+            self.last.push_back((index, out.feedback));
+        }
+        self.prediction = pb_next.map(|(k, since)| (k, if predicted { since } else { 0 }));
         let images = if cfg.reconstruction {
             let t = Instant::now();
             let images = self.reconstruct(frame, placement, views, cfg, out.images);
@@ -381,7 +445,11 @@ impl Renderer {
             out.images
         };
         stats.total_ms = ms(start);
-        Ok(Frame { images, stats })
+        Ok(Frame {
+            images,
+            stats,
+            predicted,
+        })
     }
 
     /// Frame reconstruction (G10 §5): the rendered sub-frame into each
@@ -448,7 +516,12 @@ fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-/// What a view's reconstruction history was made under.
+/// Half the window, in source voxels, that a ray which hit the surface last
+/// frame searches from before its last hit (B10 §4.4, local traversal).
+pub const PREDICTION_WINDOW_VOXELS: f64 = 8.0;
+
+/// What a view's reconstruction history (or prediction buffer) was made
+/// under.
 struct HistoryKey {
     views: Vec<View>,
     cfg: RenderConfig,

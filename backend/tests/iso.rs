@@ -229,3 +229,76 @@ fn iso_scenes_are_checked() {
     let s = Scene::load(&write("c.toml", "mode = \"iso\"\nisovalue = 80\n")).unwrap();
     assert_eq!(s.render.isovalue, Some(80.0));
 }
+
+/// The prediction buffer (B10 §4) on the shells turning 1° per frame: a full
+/// traversal every α frames equals the plain isosurface render bit for bit,
+/// and the predicted frames in between differ from it in few pixels.
+#[test]
+fn the_prediction_buffer_follows_a_rotation() {
+    let n = 64;
+    let vol = Volume::from_fn([n; 3], [1.0; 3], VoxelType::F32, |i, j, k| {
+        synth_value(SynthKind::Shells, i, j, k, n) as f32
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("shells.pxo");
+    store::import(
+        &mut MemorySource::new(&vol),
+        &db,
+        "shells",
+        &ImportOptions {
+            brick: 16,
+            encoding: BrickEncoding::F32,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let view = View::window([96, 72], [0.4, 0.3], [0.0, 0.0, 0.8]);
+    let mut plain = iso_config(0.3);
+    plain.accuracy = 1.0;
+    plain.shading = Shading::Phong;
+    let pb_cfg = RenderConfig {
+        prediction: true,
+        full_traversal_every: 5,
+        ..plain.clone()
+    };
+    let at = |f: usize| Placement {
+        center: [0.0, 0.0, 0.0],
+        rotation_deg: [20.0, 30.0 + f as f64, 0.0],
+        size: 0.2,
+    };
+    let mut a = Renderer::new(&db, &plain).unwrap();
+    let mut b = Renderer::new(&db, &pb_cfg).unwrap();
+    for r in [&mut a, &mut b] {
+        r.set_transfer_function(1, &grey()).unwrap();
+        r.converge(&at(0), &[view], &plain, 30).unwrap();
+        r.sync_io = true;
+    }
+    let mut predicted = Vec::new();
+    for f in 0..12 {
+        let x = a.frame(f as u64, &at(f), &[view], &plain).unwrap();
+        let y = b.frame(f as u64, &at(f), &[view], &pb_cfg).unwrap();
+        let was_predicted = y.predicted;
+        let (x, y) = (&x.images[0], &y.images[0]);
+        if was_predicted {
+            let differ = x
+                .iter()
+                .zip(y)
+                .filter(|(p, q)| (0..4).any(|c| (p[c] - q[c]).abs() > 1.0 / 255.0))
+                .count();
+            eprintln!(
+                "frame {f}: predicted, {differ} of {} pixels differ",
+                x.len()
+            );
+            assert!(differ * 100 < x.len(), "frame {f}: {differ} pixels differ");
+        } else {
+            assert!(
+                x == y,
+                "frame {f}: a full traversal equals the plain render"
+            );
+        }
+        predicted.push(was_predicted);
+    }
+    // Full traversal first (no prediction yet), then every 5th frame.
+    let want: Vec<bool> = (0..12).map(|f| f % 5 != 0).collect();
+    assert_eq!(predicted, want);
+}

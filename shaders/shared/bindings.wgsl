@@ -40,6 +40,7 @@ struct GpuFrame {
     optics: vec4<f32>,    // MImDA γ, the transfer function's largest importance, 0, 0
     aux: vec4<u32>,       // (ι, ν, 0, 0) table: first entry, running-integral offset (0: none), 0, 0
     iso: vec4<f32>,       // isovalue, the surface's linear RGB colour (mode "iso")
+    predict: vec4<f32>,   // prediction buffer: mode (0 off, 1 full traversal, 2 predicted), local window (data units), κ low, κ high
     tf_offsets: array<vec4<u32>, 8>,  // pyramid level offsets (32)
 }
 
@@ -56,10 +57,13 @@ struct ToolParams {
 @group(0) @binding(1) var<storage, read> views: array<GpuView>;
 @group(0) @binding(2) var<storage, read> index: array<IndexNode>;
 @group(0) @binding(3) var pool: texture_3d<f32>;
-@group(0) @binding(4) var<storage, read> slot_range: array<vec2<f32>>;  // (min, max − min) per slot
+@group(0) @binding(4) var<storage, read> slot_range: array<vec4<f32>>;  // (min, max − min, variance on [0, 1] among bricks, 0) per slot
 // (τ, k̃r, k̃g, k̃b) interleaved: node values, then the pyramid levels.
 @group(0) @binding(5) var<storage, read> table: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> feedback: array<u32>;
 @group(0) @binding(7) var<storage, read_write> image: array<vec4<f32>>;
 @group(0) @binding(8) var pool_sampler: sampler;
 @group(0) @binding(9) var<uniform> tools: array<ToolParams, 3>;
+// Isosurfaces: each pixel's last hit distance along its ray (volume units),
+// or PB_MISS_SURFACE / PB_MISS_BOX (B10 §4.1). Read and written per pixel.
+@group(0) @binding(10) var<storage, read_write> prediction: array<f32>;

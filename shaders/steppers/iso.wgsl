@@ -5,6 +5,10 @@
 
 #import sampling
 
+// Prediction buffer values besides a hit distance (B10 §4.1).
+const PB_MISS_SURFACE: f32 = -1.0;
+const PB_MISS_BOX: f32 = -2.0;
+
 // Bisections of a bracket: the hit is within step / 2^ISO_BISECTIONS.
 const ISO_BISECTIONS: u32 = 12u;
 

@@ -181,6 +181,9 @@ pub struct RenderSettings {
     pub iso: [f32; 4],
     /// Render only this quincunx sub-frame (frame reconstruction, G10 §5).
     pub subframe: Option<u32>,
+    /// Prediction buffer (B10 §4): mode (0 off, 1 full traversal, 2
+    /// predicted), local window (data units), κ low, κ high.
+    pub predict: [f32; 4],
     /// The enhancers' constant parameters, in chain order.
     pub tools: [ToolParams; MAX_ENHANCERS],
 }
@@ -195,6 +198,7 @@ impl Default for RenderSettings {
             gamma: 0.0,
             iso: [0.0; 4],
             subframe: None,
+            predict: [0.0; 4],
             tools: [ToolParams::default(); MAX_ENHANCERS],
         }
     }
@@ -222,6 +226,9 @@ pub struct Rendered {
     pub feedback: Vec<u32>,
     /// Wall time of the GPU work (dispatch to readback).
     pub seconds: f64,
+    /// The prediction buffer was asked for but had just been (re)made, so
+    /// this frame was a full traversal that fills it.
+    pub prediction_reset: bool,
 }
 
 pub struct Raycaster {
@@ -298,6 +305,10 @@ struct FrameBuffers {
     feedback: Grown,
     image: Grown,
     readback: Grown,
+    /// Isosurfaces: each pixel's last hit distance (B10 §4); its contents
+    /// mean nothing after it is made or grown.
+    prediction: Grown,
+    prediction_fresh: bool,
     /// The bind group and the (table, pool) it was made for.
     bind: Option<(wgpu::BindGroup, u64, u64)>,
     /// Buffers made and bind groups made so far (reuse is checked by tests).
@@ -317,6 +328,7 @@ const FEEDBACK: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_SRC)
     .union(wgpu::BufferUsages::COPY_DST);
 const IMAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC);
+const PREDICTION: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE;
 const READBACK: wgpu::BufferUsages =
     wgpu::BufferUsages::MAP_READ.union(wgpu::BufferUsages::COPY_DST);
 
@@ -334,9 +346,11 @@ impl FrameBuffers {
             feedback: Grown::new(gpu, "visibility feedback", FEEDBACK, 0),
             image: Grown::new(gpu, "image", IMAGE, 0),
             readback: Grown::new(gpu, "readback", READBACK, 0),
+            prediction: Grown::new(gpu, "prediction buffer", PREDICTION, 0),
+            prediction_fresh: true,
             bind: None,
             made: FrameBufferCounts {
-                buffers: 6,
+                buffers: 7,
                 bind_groups: 0,
             },
         }
@@ -351,7 +365,10 @@ impl FrameBuffers {
             self.feedback
                 .fit(gpu, "visibility feedback", FEEDBACK, index / 6),
             self.image.fit(gpu, "image", IMAGE, image),
+            self.prediction
+                .fit(gpu, "prediction buffer", PREDICTION, image / 4),
         ];
+        self.prediction_fresh |= grown[4];
         let readback = self
             .readback
             .fit(gpu, "readback", READBACK, image + index / 6);
@@ -448,6 +465,7 @@ impl Raycaster {
                         },
                         count: None,
                     },
+                    storage(10, false),
                 ],
             });
         let filter = if hw_filter {
@@ -603,9 +621,10 @@ impl Raycaster {
                 images,
                 feedback: vec![0; index.len()],
                 seconds: 0.0,
+                prediction_reset: false,
             });
         }
-        let frame = self.frame_uniform(pool, tf, scene, settings);
+        let mut frame = self.frame_uniform(pool, tf, scene, settings);
         let dev = &gpu.device;
         let fb_size = index.len() as u64 * 4;
         let img_size = pixels * 16;
@@ -614,6 +633,13 @@ impl Raycaster {
         }
         let views_bytes = (gviews.len() * std::mem::size_of::<GpuView>()) as u64;
         self.frame.fit(gpu, views_bytes, fb_size * 6, img_size);
+        // A prediction buffer just made holds nothing: traverse fully.
+        let mut prediction_reset = false;
+        if frame.predict[0] > 0.0 && self.frame.prediction_fresh {
+            prediction_reset = frame.predict[0] > 1.5;
+            frame.predict[0] = 1.0;
+            self.frame.prediction_fresh = false;
+        }
         let fr = &self.frame;
         gpu.queue
             .write_buffer(&fr.uniform, 0, bytemuck::bytes_of(&frame));
@@ -665,6 +691,10 @@ impl Raycaster {
                     wgpu::BindGroupEntry {
                         binding: 9,
                         resource: self.tools.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 10,
+                        resource: fr.prediction.buffer.as_entire_binding(),
                     },
                 ],
             });
@@ -729,6 +759,7 @@ impl Raycaster {
                 images,
                 feedback,
                 seconds: start.elapsed().as_secs_f64(),
+                prediction_reset,
             })
         }
     }
@@ -797,6 +828,7 @@ impl Raycaster {
             optics: [s.gamma, tf.max_importance, 0.0, 0.0],
             aux: [tf.aux_base, tf.aux_prefix, 0, 0],
             iso: s.iso,
+            predict: s.predict,
             tf_offsets,
         }
     }

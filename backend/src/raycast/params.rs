@@ -47,6 +47,9 @@ pub struct GpuFrame {
     pub aux: [u32; 4],
     /// Isovalue and the surface's linear RGB colour (mode "iso").
     pub iso: [f32; 4],
+    /// Prediction buffer: mode (0 off, 1 full traversal, 2 predicted),
+    /// local window (data units), κ low, κ high (B10 §4).
+    pub predict: [f32; 4],
     pub tf_offsets: [[u32; 4]; 8],
 }
 

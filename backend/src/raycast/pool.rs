@@ -78,7 +78,7 @@ impl BrickPool {
         let view = texture.create_view(&Default::default());
         let ranges = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("brick ranges"),
-            size: grid.iter().product::<u32>() as u64 * 8,
+            size: grid.iter().product::<u32>() as u64 * 16,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -104,8 +104,10 @@ impl BrickPool {
         self.uploaded
     }
 
-    /// Copies a brick's (B+4)³ data values into a slot.
-    pub fn upload(&mut self, gpu: &Gpu, slot: u32, values: &[f32]) {
+    /// Copies a brick's (B+4)³ data values into a slot. `variance` is the
+    /// brick's variance placed on [0, 1] among the dataset's bricks (the
+    /// prediction buffer's step, B10 §4.5).
+    pub fn upload(&mut self, gpu: &Gpu, slot: u32, values: &[f32], variance: f32) {
         let s = self.side;
         assert_eq!(values.len(), (s * s * s) as usize, "brick size");
         assert!(slot < self.slots(), "slot {slot} out of the pool");
@@ -164,8 +166,9 @@ impl BrickPool {
                 depth_or_array_layers: s,
             },
         );
+        let entry = [range[0], range[1], variance.clamp(0.0, 1.0), 0.0];
         gpu.queue
-            .write_buffer(&self.ranges, slot as u64 * 8, bytemuck::cast_slice(&range));
+            .write_buffer(&self.ranges, slot as u64 * 16, bytemuck::cast_slice(&entry));
         self.uploaded += bytes.len() as u64;
     }
 }
