@@ -159,6 +159,10 @@ enum Command {
         /// The isovalue of --prediction.
         #[arg(long, default_value_t = 80.0)]
         isovalue: f64,
+        /// The interaction script --reconstruction and --prediction run
+        /// (its first N frames).
+        #[arg(long, default_value = "configs/scripts/rotate-1deg.toml")]
+        script: PathBuf,
     },
     /// Transfer functions: import ParaView and 3D Slicer presets.
     Tf {
@@ -420,7 +424,27 @@ fn run(cli: Cli) -> Result<()> {
             reconstruction,
             prediction,
             isovalue,
+            script,
         } => {
+            // The placements of the first `n` frames of the script, from the
+            // desktop view of Colin27.
+            let script_placements = |n: usize| -> Result<Vec<parallax_common::camera::Placement>> {
+                let s = parallax_frontend::script::Script::load(&script)?;
+                let start = parallax_common::camera::Placement {
+                    center: [0.0, 0.0, 0.0],
+                    rotation_deg: [-90.0, 180.0, 0.0],
+                    size: 0.25,
+                };
+                anyhow::ensure!(
+                    n as u64 <= s.frames,
+                    "{}: has {} frames, {n} asked for",
+                    script.display(),
+                    s.frames
+                );
+                Ok((0..n as u64)
+                    .map(|f| s.at(f, &start, [0.0, 0.0, 0.8], 0.0).placement)
+                    .collect())
+            };
             if !codecs.is_empty() {
                 let encoding = BrickEncoding::parse(&quantize).with_context(|| {
                     format!("--quantize '{quantize}': expected u8, u16 or none")
@@ -458,18 +482,23 @@ fn run(cli: Cli) -> Result<()> {
                     &volume.display().to_string(),
                     &ImportOptions::default(),
                 )?;
-                let placement = parallax_common::camera::Placement {
-                    center: [0.0, 0.0, 0.0],
-                    rotation_deg: [-90.0, 180.0, 0.0],
-                    size: 0.25,
-                };
+                let placements = script_placements(frames)?;
                 let view =
                     parallax_common::camera::View::window([w, h], [0.4, 0.3], [0.0, 0.0, 0.8]);
                 let kappas = [[0.1, 0.3], [0.2, 0.6], [0.5, 1.0], [1.0, 2.0], [2.0, 2.0]];
                 let pts = parallax_backend::bench::run_prediction(
-                    &db, &tf, isovalue, placement, view, frames, &kappas, &out,
+                    &db,
+                    &tf,
+                    isovalue,
+                    &placements,
+                    view,
+                    &kappas,
+                    &out,
                 )?;
-                println!("{frames} frames per κ, {w}×{h}, isovalue {isovalue}, 1° per frame:");
+                println!(
+                    "{frames} frames of {} per κ, {w}×{h}, isovalue {isovalue}:",
+                    script.display()
+                );
                 for k in kappas {
                     let q: Vec<_> = pts.iter().filter(|p| p.kappa == k).collect();
                     let full: f64 = q.iter().map(|p| p.full_ms).sum();
@@ -507,22 +536,18 @@ fn run(cli: Cli) -> Result<()> {
                     &volume.display().to_string(),
                     &ImportOptions::default(),
                 )?;
-                let placement = parallax_common::camera::Placement {
-                    center: [0.0, 0.0, 0.0],
-                    rotation_deg: [-90.0, 180.0, 0.0],
-                    size: 0.25,
-                };
+                let placements = script_placements(frames)?;
                 let view =
                     parallax_common::camera::View::window([w, h], [0.4, 0.3], [0.0, 0.0, 0.8]);
-                let pts = parallax_backend::bench::run_reconstruction(
-                    &db, &tf, placement, view, frames, &out,
-                )?;
+                let pts =
+                    parallax_backend::bench::run_reconstruction(&db, &tf, &placements, view, &out)?;
                 let full: f64 = pts.iter().map(|p| p.full_ms).sum();
                 let rec: f64 = pts.iter().map(|p| p.reconstructed_ms).sum();
                 let mean = pts.iter().map(|p| p.psnr_db).sum::<f64>() / pts.len().max(1) as f64;
                 let worst = pts.iter().map(|p| p.psnr_db).fold(f64::INFINITY, f64::min);
                 println!(
-                    "{frames} frames, {w}×{h}, 1° per frame: full {:.1} ms/frame, reconstructed {:.1} ms/frame: speed-up {:.2}×; PSNR against full mean {mean:.1} dB, worst {worst:.1} dB",
+                    "{frames} frames of {}, {w}×{h}: full {:.1} ms/frame, reconstructed {:.1} ms/frame: speed-up {:.2}×; PSNR against full mean {mean:.1} dB, worst {worst:.1} dB",
+                    script.display(),
                     full / frames as f64,
                     rec / frames as f64,
                     full / rec

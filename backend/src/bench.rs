@@ -592,19 +592,20 @@ pub struct ReconstructionPoint {
     pub psnr_db: f64,
 }
 
-/// Adaptive frame reconstruction (G10 §5) against full rendering on a
-/// rotation of 1° per frame: both renderers converge their cut on the first
-/// view, then render `frames` frames (loads waited for, so both see the same
-/// cut); the frame time of each and the PSNR of the reconstructed frame
-/// against the full one. Writes `reconstruction.csv` in `out`.
+/// Adaptive frame reconstruction (G10 §5) against full rendering over a
+/// sequence of placements (an interaction script): both renderers converge
+/// their cut on the first, then render one frame per placement (loads
+/// waited for, so both see the same cut); the frame time of each and the
+/// PSNR of the reconstructed frame against the full one. Writes `reconstruction.csv` in `out`.
 pub fn run_reconstruction(
     db: &Path,
     tf: &TransferFunction,
-    placement: Placement,
+    placements: &[Placement],
     view: View,
-    frames: usize,
     out: &Path,
 ) -> Result<Vec<ReconstructionPoint>> {
+    anyhow::ensure!(!placements.is_empty(), "reconstruction bench: no frames");
+    let placement = placements[0];
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let full_cfg = RenderConfig {
         shading: Shading::Phong,
@@ -623,14 +624,12 @@ pub fn run_reconstruction(
     full.sync_io = true;
     rec.sync_io = true;
     let mut points = Vec::new();
-    for f in 0..frames {
-        let mut p = placement;
-        p.rotation_deg[1] += f as f64;
+    for (f, p) in placements.iter().enumerate() {
         let t = Instant::now();
-        let a = full.frame(f as u64, &p, &[view], &full_cfg)?;
+        let a = full.frame(f as u64, p, &[view], &full_cfg)?;
         let full_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
-        let b = rec.frame(f as u64, &p, &[view], &rec_cfg)?;
+        let b = rec.frame(f as u64, p, &[view], &rec_cfg)?;
         let reconstructed_ms = t.elapsed().as_secs_f64() * 1e3;
         let reference: Vec<[f64; 4]> = a.images[0].iter().map(|p| p.map(|v| v as f64)).collect();
         points.push(ReconstructionPoint {
@@ -672,19 +671,20 @@ pub struct PredictionPoint {
 }
 
 /// The prediction buffer (B10 §4) against full traversal on an isosurface
-/// turned 1° per frame, for each κ pair; both renderers first converge their
-/// cut. Writes `prediction.csv` in `out`.
+/// over a sequence of placements (an interaction script), for each κ pair;
+/// both renderers first converge their cut. Writes `prediction.csv` in `out`.
 #[allow(clippy::too_many_arguments)]
 pub fn run_prediction(
     db: &Path,
     tf: &TransferFunction,
     isovalue: f64,
-    placement: Placement,
+    placements: &[Placement],
     view: View,
-    frames: usize,
     kappas: &[[f64; 2]],
     out: &Path,
 ) -> Result<Vec<PredictionPoint>> {
+    anyhow::ensure!(!placements.is_empty(), "prediction bench: no frames");
+    let placement = placements[0];
     use parallax_common::config::Mode;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     // Visibility feedback off in both, so that both render the same cut
@@ -711,14 +711,12 @@ pub fn run_prediction(
         pb.set_transfer_function(1, tf)?;
         pb.converge(&placement, &[view], &full_cfg, 40)?;
         pb.sync_io = true;
-        for f in 0..frames {
-            let mut p = placement;
-            p.rotation_deg[1] += f as f64;
+        for (f, p) in placements.iter().enumerate() {
             let t = Instant::now();
-            let a = full.frame(f as u64, &p, &[view], &full_cfg)?;
+            let a = full.frame(f as u64, p, &[view], &full_cfg)?;
             let full_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = Instant::now();
-            let b = pb.frame(f as u64, &p, &[view], &cfg)?;
+            let b = pb.frame(f as u64, p, &[view], &cfg)?;
             let predicted_ms = t.elapsed().as_secs_f64() * 1e3;
             let (x, y) = (&a.images[0], &b.images[0]);
             let differ = x
