@@ -424,3 +424,40 @@ fn nan_is_refused_or_no_data() {
     assert!(err.contains("1 voxels are NaN: no data"), "{err}");
     ok(&["info", s(&db), "--verify"]);
 }
+
+/// A projector file can name its back end's GPU adapter (by name or #N); an
+/// adapter that is not there is an error naming the projector and listing
+/// the adapters.
+#[test]
+fn a_projector_names_its_adapter() {
+    let d = tempfile::tempdir().unwrap();
+    let vol = d.path().join("ml.nrrd");
+    ok(&["synth", "marschner-lobb", "--size", "16", "-o", s(&vol)]);
+    ok(&["import", s(&vol), "-o", s(&d.path().join("ml.pxo")), "--brick", "8"]);
+    write(
+        d.path().join("tf.toml"),
+        "[[point]]\nvalue = 0\ncolor = [1, 1, 1]\nextinction = 0.1\n[[point]]\nvalue = 255\ncolor = [1, 1, 1]\nextinction = 0.1\n",
+    );
+    write(
+        d.path().join("display.toml"),
+        "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.01\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
+    );
+    let scene = write(
+        d.path().join("scene.toml"),
+        "volume = \"ml.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\n",
+    );
+    let projector = |adapter: &str| {
+        write(
+            d.path().join("p/a.toml"),
+            &format!("id = \"a\"\nposition = [0, 0, 0.8]\nresolution = [8, 6]\nadapter = \"{adapter}\"\n"),
+        )
+    };
+    projector("no-such-gpu");
+    let e = fails(&["render", "--scene", s(&scene), "--frames", "1", "--out", s(&d.path().join("o1"))]);
+    assert!(
+        e.contains("projector a: adapter = \"no-such-gpu\": no such adapter") && e.contains("#0 "),
+        "{e}"
+    );
+    projector("#0");
+    ok(&["render", "--scene", s(&scene), "--frames", "1", "--out", s(&d.path().join("o2"))]);
+}

@@ -119,7 +119,16 @@ fn handle(
         } => {
             let assignment = display.assignment(backends)?;
             let mine = assignment[link.rank() as usize - 1].clone();
-            let mut renderer = Renderer::new(&scene.volume, &scene.render)?;
+            // A projector file may name this back end's GPU; otherwise the
+            // node-local rank picks one (embedded: the back-end index).
+            let named = mine.iter().find_map(|&p| {
+                let pr = &display.projectors[p];
+                pr.adapter
+                    .clone()
+                    .map(|a| (a, format!("projector {}: adapter", pr.id)))
+            });
+            let req = crate::gpu::AdapterRequest::from_env(named, link.rank() as usize - 1);
+            let mut renderer = Renderer::with_adapter(&scene.volume, &scene.render, &req)?;
             renderer.sync_io = sync_io;
             let screen = &display.screen;
             renderer.set_lightfield((screen.angular_accuracy_deg > 0.0).then_some(

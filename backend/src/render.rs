@@ -71,8 +71,21 @@ pub struct Frame {
 
 impl Renderer {
     pub fn new(database: &Path, cfg: &RenderConfig) -> Result<Self> {
+        Self::with_adapter(
+            database,
+            cfg,
+            &crate::gpu::AdapterRequest::from_env(None, 0),
+        )
+    }
+
+    /// A renderer on the adapter `req` chooses (backend/src/gpu.rs).
+    pub fn with_adapter(
+        database: &Path,
+        cfg: &RenderConfig,
+        req: &crate::gpu::AdapterRequest,
+    ) -> Result<Self> {
         let db = Arc::new(OctreeDb::open(database)?);
-        let gpu = Gpu::new()?;
+        let gpu = Gpu::with_request(req)?;
         let layout = *db.layout();
         let float = db.encoding() != BrickEncoding::U8Range;
         let filtering = match cfg.interpolation {

@@ -328,6 +328,7 @@ fn projector(k: usize, position: [f64; 3], region: Option<[f64; 4]>) -> Projecto
         resolution: [8, 6],
         region,
         rank: None,
+        adapter: None,
     }
 }
 

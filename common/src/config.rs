@@ -355,6 +355,10 @@ pub struct Projector {
     /// The back-end rank that drives it (default: contiguous blocks).
     #[serde(default)]
     pub rank: Option<u32>,
+    /// The GPU adapter its back end renders with (a name, or `#N`); default:
+    /// by the back end's node-local rank (backend/src/gpu.rs).
+    #[serde(default)]
+    pub adapter: Option<String>,
 }
 
 /// A display: screen, observer and projectors.
