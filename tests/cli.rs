@@ -433,7 +433,14 @@ fn a_projector_names_its_adapter() {
     let d = tempfile::tempdir().unwrap();
     let vol = d.path().join("ml.nrrd");
     ok(&["synth", "marschner-lobb", "--size", "16", "-o", s(&vol)]);
-    ok(&["import", s(&vol), "-o", s(&d.path().join("ml.pxo")), "--brick", "8"]);
+    ok(&[
+        "import",
+        s(&vol),
+        "-o",
+        s(&d.path().join("ml.pxo")),
+        "--brick",
+        "8",
+    ]);
     write(
         d.path().join("tf.toml"),
         "[[point]]\nvalue = 0\ncolor = [1, 1, 1]\nextinction = 0.1\n[[point]]\nvalue = 255\ncolor = [1, 1, 1]\nextinction = 0.1\n",
@@ -453,11 +460,27 @@ fn a_projector_names_its_adapter() {
         )
     };
     projector("no-such-gpu");
-    let e = fails(&["render", "--scene", s(&scene), "--frames", "1", "--out", s(&d.path().join("o1"))]);
+    let e = fails(&[
+        "render",
+        "--scene",
+        s(&scene),
+        "--frames",
+        "1",
+        "--out",
+        s(&d.path().join("o1")),
+    ]);
     assert!(
         e.contains("projector a: adapter = \"no-such-gpu\": no such adapter") && e.contains("#0 "),
         "{e}"
     );
     projector("#0");
-    ok(&["render", "--scene", s(&scene), "--frames", "1", "--out", s(&d.path().join("o2"))]);
+    ok(&[
+        "render",
+        "--scene",
+        s(&scene),
+        "--frames",
+        "1",
+        "--out",
+        s(&d.path().join("o2")),
+    ]);
 }

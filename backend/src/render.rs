@@ -136,6 +136,7 @@ impl Renderer {
                 upload_budget: cfg.upload_budget.max(1),
                 accuracy: cfg.accuracy,
                 use_feedback: cfg.visibility_feedback,
+                frustum_culling: true,
                 io_threads: 2,
             },
         );
@@ -190,6 +191,12 @@ impl Renderer {
         // Last frame's visibility was for another transfer function.
         self.last.clear();
         Ok(())
+    }
+
+    /// Turns the loader's view-frustum culling on or off (tests compare the
+    /// images with and without it).
+    pub fn set_frustum_culling(&mut self, on: bool) {
+        self.loader.set_frustum_culling(on);
     }
 
     /// The bricks resident in the GPU pool (the cut's bricks with data, and

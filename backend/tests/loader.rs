@@ -63,6 +63,7 @@ fn config(accuracy: f64) -> LoaderConfig {
         upload_budget: 1000,
         accuracy,
         use_feedback: false,
+        frustum_culling: true,
         io_threads: 2,
     }
 }
@@ -498,6 +499,7 @@ fn feedback_keeps_the_invisible_half_coarse() {
         db.clone(),
         LoaderConfig {
             use_feedback: true,
+            frustum_culling: true,
             ..config(1e-6)
         },
     );

@@ -269,6 +269,7 @@ fn loader_bricks(
             upload_budget: cfg.upload_budget,
             accuracy: cfg.accuracy,
             use_feedback: false,
+            frustum_culling: true,
             io_threads: 2,
         },
     );
@@ -916,5 +917,49 @@ fn stress_cases_render_or_fail_clearly() {
         let mut r = renderer(&db, &tf, &ok);
         let f = r.converge(&placement, &[normal], &ok, 40).unwrap();
         assert!(f.stats.cut_nodes > 1, "{field} = {smallest}: refines");
+    }
+}
+
+/// Frustum culling for light field views (η > 0): the volume swept by a
+/// multi-centre projector's rays. A view of part of the screen culls the
+/// bricks beside it, and the image equals the unculled one bit for bit.
+#[test]
+fn light_field_frustum_culling_removes_nothing_that_contributes() {
+    let vol = marschner_lobb(64);
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("ml.pxo");
+    import_volume(&vol, &db, 8, BrickEncoding::U8Range);
+    let cfg = RenderConfig {
+        accuracy: 0.5,
+        visibility_feedback: false,
+        ..exact_config()
+    };
+    let placement = centred(0.3);
+    for (eta, eye_x) in [(1.0, 0.15), (0.5, -0.2), (1.0, -0.35)] {
+        // The left third of a 0.6 m screen, from a projector off to the side.
+        let view = View {
+            resolution: [48, 72],
+            region: [-0.3, -0.15, 0.2, 0.3],
+            eye: [eye_x, 0.0, 0.9],
+            observer: [0.0, 0.0, 0.8],
+            eta,
+        };
+        let mut images = Vec::new();
+        let mut leaves = Vec::new();
+        for culling in [true, false] {
+            let mut r = renderer(&db, &translucent(), &cfg);
+            r.set_frustum_culling(culling);
+            let f = r.converge(&placement, &[view], &cfg, 40).unwrap();
+            assert!(f.stats.adequate);
+            images.push(f.images[0].clone());
+            leaves.push(f.stats.cut_leaves_with_data);
+        }
+        eprintln!(
+            "η {eta}, projector x {eye_x}: {} leaves with data culled, {} without",
+            leaves[0], leaves[1]
+        );
+        assert!(leaves[0] < leaves[1], "culling removed nothing: {leaves:?}");
+        assert!(mean_alpha(&images[0]) > 0.02, "the view sees the volume");
+        assert!(images[0] == images[1], "η {eta}: culling changed the image");
     }
 }

@@ -55,8 +55,10 @@ pub struct RenderConfig {
     pub mode: Mode,
     #[serde(default)]
     pub gamma: f64,
-    /// Voxels per display pixel: a node is adequate when one of its voxels
-    /// projects to at most this many pixels.
+    /// The largest size, in display pixels, one voxel of a leaf may project
+    /// to: a node is adequate when its voxels project to at most this many
+    /// pixels (1: a voxel per pixel, G10's setting; 0.5 refines one level
+    /// further, 2 one level less).
     #[serde(default = "one")]
     pub accuracy: f64,
     /// Step length as a fraction of the leaf's voxel size.

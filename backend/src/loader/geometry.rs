@@ -74,10 +74,12 @@ struct ViewGeom {
     screen_dist: f64,
     /// Width of one of the view's pixels on the screen (m).
     pixel_m: f64,
-    /// Inward normals of the four side planes of the pyramid from the
-    /// observer through the view's screen region; `None` = no culling (η > 0,
-    /// or a degenerate view).
-    planes: Option<[DVec3; 4]>,
+    /// The pyramids (apex, inward normals of the four side planes) whose
+    /// union holds every ray of the view: one from the observer (η = 0), or
+    /// two from the ends of the segment that a multi-centre projector's ray
+    /// origins lie on (η > 0, G10 Eq. 1); `None` = no culling (a degenerate
+    /// view).
+    planes: Option<Vec<(DVec3, [DVec3; 4])>>,
     /// A light field view (η > 0): its detail follows s(z), not its pixels.
     parallax: bool,
 }
@@ -89,6 +91,9 @@ pub(crate) struct Assessment {
     /// that may see the node (G10 §5: the finest requirement among this
     /// process's views); over all views when none does.
     pub pixels: f64,
+    /// The same from the distance to the closest point alone (what L12
+    /// §4.2.1 improves on off the view axis; kept for tests and figures).
+    pub distance_pixels: f64,
     /// Whether at least one view frustum contains (part of) the node.
     pub seen: bool,
 }
@@ -116,11 +121,7 @@ impl FrameGeometry {
                     observer_vol,
                     screen_dist: v.observer[2].abs(),
                     pixel_m: v.region[2] / v.resolution[0].max(1) as f64,
-                    planes: if v.eta == 0.0 {
-                        frustum_planes(observer, v.region)
-                    } else {
-                        None
-                    },
+                    planes: view_pyramids(v),
                     parallax: v.eta != 0.0,
                 }
             })
@@ -145,15 +146,22 @@ impl FrameGeometry {
 
     /// Projected voxel size and frustum status of a node.
     ///
-    /// For a view: pixels = voxel_m · D / (dist · pixel_m), voxel_m the
-    /// node's voxel edge in display metres, D = |V_z| the observer's distance
-    /// to the screen, dist the distance from the observer to the closest point
-    /// of the node's box in display space, pixel_m = region width / W
-    /// (G08 §4 "projected screen-space size of voxels", L12 §4.2). The
-    /// placement is a similarity (rotation and uniform scale), so the closest
-    /// point of the display-space box is found exactly by clamping the
-    /// observer, mapped to volume space, to the box there. dist ≈ 0 (the
-    /// observer inside or on the box) gives +∞.
+    /// For a view, the larger of two estimates:
+    ///
+    /// * by distance: voxel_m · D / (dist · pixel_m), voxel_m the node's
+    ///   voxel edge in display metres, D = |V_z| the observer's distance to
+    ///   the screen, dist the distance from the observer to the closest point
+    ///   of the node's box, pixel_m = region width / W (G08 §4). The
+    ///   placement is a similarity, so the closest point is found exactly by
+    ///   clamping the observer, mapped to volume space, to the box there;
+    ///   dist ≈ 0 (the observer inside or on the box) gives +∞;
+    /// * L12 §4.2.1 Eq. 1: the projection on the screen plane of the box's
+    ///   bounding sphere (radius R, centre O), |A'B'| = D·|tan(α+β) +
+    ///   tan(α−β)| with sin α = R/|VO| and β the angle between VO and the
+    ///   screen normal, divided by the voxels across the sphere (2R/voxel_m).
+    ///   Off the view axis this grows as 1/cos²β, where the distance alone
+    ///   under-refines (L12 Fig. 4); a sphere that reaches the observer's
+    ///   plane (α + β ≥ 90°) gives +∞.
     pub fn assess(&self, key: NodeKey) -> Assessment {
         let (lo, hi) = self.geom.node_box(key);
         let voxel_m = self.geom.voxel_len(key.level as u32) * self.scale;
@@ -177,24 +185,35 @@ impl FrameGeometry {
             };
             voxel_m / lf.resolution_at(z)
         });
+        let centre = self.placement.to_display(self.geom.extent, (lo + hi) * 0.5);
+        let radius = (hi - lo).length() * 0.5 * self.scale;
         let mut best_seen = f64::NEG_INFINITY;
         let mut best_any = f64::NEG_INFINITY;
+        let mut best_distance = f64::NEG_INFINITY;
         let mut seen = false;
         for v in &self.views {
             let closest = v.observer_vol.clamp(lo, hi);
             let dist = (closest - v.observer_vol).length() * self.scale;
+            let by_distance = if dist <= TOUCHING_M || v.pixel_m <= 0.0 {
+                f64::INFINITY
+            } else {
+                voxel_m * v.screen_dist / (dist * v.pixel_m)
+            };
             let px = if let (true, Some(p)) = (v.parallax, lf_pixels) {
                 p
-            } else if dist <= TOUCHING_M {
-                f64::INFINITY
-            } else if v.pixel_m > 0.0 {
-                voxel_m * v.screen_dist / (dist * v.pixel_m)
             } else {
-                f64::INFINITY
+                by_distance.max(l12_pixels(
+                    centre - v.observer,
+                    radius,
+                    voxel_m,
+                    v.screen_dist,
+                    v.pixel_m,
+                ))
             };
+            best_distance = best_distance.max(by_distance);
             best_any = best_any.max(px);
             let inside = match (&v.planes, &corners) {
-                (Some(planes), Some(c)) => box_in_pyramid(v.observer, planes, c),
+                (Some(p), Some(c)) => box_in_union(p, c),
                 _ => true,
             };
             if inside {
@@ -204,6 +223,7 @@ impl FrameGeometry {
         }
         let pixels = if seen { best_seen } else { best_any };
         Assessment {
+            distance_pixels: best_distance.max(0.0),
             // no views (−∞) or a degenerate one (NaN): nothing to refine for
             pixels: if pixels.is_nan() {
                 0.0
@@ -224,6 +244,26 @@ impl FrameGeometry {
             self.placement.to_display(self.geom.extent, p)
         })
     }
+}
+
+/// L12 §4.2.1 Eq. 1: the size in pixels of one voxel (edge `voxel_m`) of a
+/// node whose bounding sphere (radius `r`) is at `po` from the observer, on
+/// the screen plane `d` away along its normal (pixels of `pixel_m`).
+fn l12_pixels(po: DVec3, r: f64, voxel_m: f64, d: f64, pixel_m: f64) -> f64 {
+    let len = po.length();
+    if pixel_m <= 0.0 || r <= 0.0 {
+        return 0.0;
+    }
+    if len <= r {
+        return f64::INFINITY;
+    }
+    let alpha = (r / len).asin();
+    let beta = (po.z.abs() / len).clamp(0.0, 1.0).acos();
+    if alpha + beta >= std::f64::consts::FRAC_PI_2 - 1e-9 {
+        return f64::INFINITY;
+    }
+    let across = d * ((alpha + beta).tan() + (alpha - beta).tan()).abs();
+    across / pixel_m * voxel_m / (2.0 * r)
 }
 
 /// The four side planes (inward normals, through the apex) of the pyramid
@@ -252,12 +292,51 @@ fn frustum_planes(apex: DVec3, region: [f64; 4]) -> Option<[DVec3; 4]> {
     }))
 }
 
-/// Conservative box-in-pyramid test: the box is outside when all eight
-/// corners lie strictly outside one of the side planes.
-fn box_in_pyramid(apex: DVec3, planes: &[DVec3; 4], corners: &[DVec3; 8]) -> bool {
-    planes
-        .iter()
-        .all(|n| corners.iter().any(|c| n.dot(*c - apex) >= 0.0))
+/// The pyramids whose union holds every ray of `v`. With η > 0 the ray of
+/// screen point Q starts at ((1−η)·V_x + η·M_x(Q), V_y, V_z), M_x(Q) the
+/// multi-centre x of G10 Eq. 1, linear in Q_x: the origins lie on the
+/// segment between those of the region's left and right edges, and every
+/// ray lies in the pyramid from some point of that segment through the
+/// region (see [`box_in_union`] for why the two end pyramids suffice).
+fn view_pyramids(v: &View) -> Option<Vec<(DVec3, [DVec3; 4])>> {
+    let observer = DVec3::from(v.observer);
+    if v.eta == 0.0 {
+        return frustum_planes(observer, v.region).map(|p| vec![(observer, p)]);
+    }
+    let e = DVec3::from(v.eye);
+    let origin_x = |qx: f64| {
+        let m = if e.z.abs() > 1e-12 {
+            e.x + (qx - e.x) / (-e.z) * (observer.z - e.z)
+        } else {
+            observer.x
+        };
+        (1.0 - v.eta) * observer.x + v.eta * m
+    };
+    let [x0, _, w, _] = v.region;
+    let ends = [origin_x(x0), origin_x(x0 + w)];
+    let mut out = Vec::new();
+    for x in ends {
+        let apex = DVec3::new(x, observer.y, observer.z);
+        out.push((apex, frustum_planes(apex, v.region)?));
+    }
+    Some(out)
+}
+
+/// Conservative test against the union of pyramids through one screen
+/// region whose apexes lie on a segment parallel to x: the box is outside
+/// when, for one side of the region, all eight corners lie strictly outside
+/// that side's plane of every end pyramid. The top and bottom planes do not
+/// depend on the apex's x (they hold the x direction); a left or right plane
+/// holds the y direction, and at any depth the union's leftmost (rightmost)
+/// point is a ray from an end of the segment, x being linear along it. So
+/// a point inside the union is inside one end pyramid's plane on every
+/// side.
+fn box_in_union(pyramids: &[(DVec3, [DVec3; 4])], corners: &[DVec3; 8]) -> bool {
+    (0..4).all(|side| {
+        pyramids
+            .iter()
+            .any(|(apex, planes)| corners.iter().any(|c| planes[side].dot(*c - *apex) >= 0.0))
+    })
 }
 
 #[cfg(test)]
@@ -353,6 +432,43 @@ mod tests {
         assert!((f.assess(NodeKey::root()).pixels - want).abs() < 1e-9 * want);
     }
 
+    /// L12 Fig. 4: two bricks at the same distance, one on the view axis and
+    /// one far off it. The distance alone gives both the same size; the
+    /// projection on the screen is larger off the axis, where L12's formula
+    /// refines a brick that the distance leaves coarse.
+    #[test]
+    fn an_off_axis_brick_is_refined_by_l12_and_not_by_distance() {
+        let g = geom();
+        let v = View::window([256, 256], [4.0, 4.0], [0.0, 0.0, 0.5]);
+        let at = |x: f64, z: f64| Placement {
+            center: [x, 0.0, z],
+            rotation_deg: [0.0, 0.0, 0.0],
+            size: 0.3,
+        };
+        // Same distance from the observer (0.9 m to the centre): on the
+        // axis, and 60° off it.
+        let key = NodeKey::new(2, 1, 1, 1);
+        let on = FrameGeometry::new(&g, &[v], &at(0.0, -0.4)).assess(key);
+        let off60 = 60f64.to_radians();
+        let off = FrameGeometry::new(&g, &[v], &at(0.9 * off60.sin(), 0.5 - 0.9 * off60.cos()))
+            .assess(key);
+        assert!(on.seen && off.seen);
+        // By distance the two are alike (within the box's extent).
+        assert!(
+            (off.distance_pixels / on.distance_pixels - 1.0).abs() < 0.15,
+            "{} {}",
+            off.distance_pixels,
+            on.distance_pixels
+        );
+        // On the axis L12 agrees with the distance; off it, about 1/cos²60° = 4×.
+        assert!(on.pixels <= on.distance_pixels * 1.05, "{on:?}");
+        assert!(off.pixels > 3.0 * off.distance_pixels, "{off:?}");
+        // So with accuracy between the two, the distance leaves it coarse
+        // and L12 refines it.
+        let accuracy = 2.0 * off.distance_pixels;
+        assert!(off.distance_pixels <= accuracy && off.pixels > accuracy);
+    }
+
     #[test]
     fn rotation_keeps_the_distance() {
         let g = geom();
@@ -380,8 +496,11 @@ mod tests {
             }
             let voxel_m = g.voxel_len(3) * pl.scale(g.extent);
             let want = voxel_m * 1.0 / (best * 0.4 / 64.0);
-            let got = f.assess(key).pixels;
+            let a = f.assess(key);
+            let got = a.distance_pixels;
             assert!((got - want).abs() <= 1e-9 * want, "{got} vs {want}");
+            // L12's estimate only ever adds to it.
+            assert!(a.pixels >= got);
             sizes.push(got);
         }
         // turned around, the back node comes to the front: larger

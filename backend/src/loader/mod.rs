@@ -62,6 +62,8 @@ pub struct LoaderConfig {
     pub accuracy: f64,
     /// G10 §5 visibility feedback culling.
     pub use_feedback: bool,
+    /// View-frustum culling (on unless a test compares against it).
+    pub frustum_culling: bool,
     /// I/O threads (at least one is started).
     pub io_threads: usize,
 }
@@ -74,6 +76,7 @@ impl Default for LoaderConfig {
             upload_budget: 64,
             accuracy: 1.0,
             use_feedback: true,
+            frustum_culling: true,
             io_threads: 2,
         }
     }
@@ -258,6 +261,11 @@ impl Loader {
         }
     }
 
+    /// Turns view-frustum culling on or off (tests compare against it).
+    pub fn set_frustum_culling(&mut self, on: bool) {
+        self.cfg.frustum_culling = on;
+    }
+
     pub fn config(&self) -> &LoaderConfig {
         &self.cfg
     }
@@ -341,7 +349,7 @@ impl Loader {
             if key.level as u32 >= leaf_level {
                 continue; // nothing finer exists
             }
-            if !c.seen {
+            if !c.seen && self.cfg.frustum_culling {
                 b.stats.culled_frustum += 1;
                 continue;
             }
@@ -704,6 +712,7 @@ mod tests {
                 upload_budget: 100,
                 accuracy: 1e-6,
                 use_feedback: false,
+                frustum_culling: true,
                 io_threads: 1,
             },
         );
