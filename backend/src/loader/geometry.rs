@@ -537,9 +537,19 @@ mod tests {
         };
         let f = FrameGeometry::new(&g, &[behind], &pl_front);
         assert!(!f.assess(NodeKey::root()).seen);
-        // η > 0: never culled
-        aside.eta = 1.0;
-        let f = FrameGeometry::new(&g, &[aside], &pl);
-        assert!(f.assess(NodeKey::root()).seen);
+        // η > 0: culled by the rays of the multi-centre projector, which
+        // reach the volume for the view ahead and not for the one aside.
+        for eye in [[0.3, 0.0, 1.2], [-0.5, 0.0, 1.5]] {
+            let mut lf_aside = aside;
+            lf_aside.eta = 1.0;
+            lf_aside.eye = eye;
+            let f = FrameGeometry::new(&g, &[lf_aside], &pl);
+            assert!(!f.assess(NodeKey::root()).seen, "{eye:?}");
+            let mut lf_ahead = ahead;
+            lf_ahead.eta = 1.0;
+            lf_ahead.eye = eye;
+            let f = FrameGeometry::new(&g, &[lf_ahead], &pl);
+            assert!(f.assess(NodeKey::root()).seen, "{eye:?}");
+        }
     }
 }
