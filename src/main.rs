@@ -471,7 +471,10 @@ fn run(cli: Cli) -> Result<()> {
                 .split_once('x')
                 .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
                 .with_context(|| format!("--size '{size}': expected WxH, e.g. 160x120"))?;
-            if let Some(frames) = prediction {
+            // What --prediction and --reconstruction share: the transfer
+            // function, the volume imported to a temporary database, the
+            // script's placements and the desktop view.
+            let sequence_setup = |frames: usize| -> Result<_> {
                 let tf = parallax_common::tf::TransferFunction::load(&tf)?;
                 let tmp = tempfile::tempdir()?;
                 let db = tmp.path().join("bench.pxo");
@@ -485,6 +488,10 @@ fn run(cli: Cli) -> Result<()> {
                 let placements = script_placements(frames)?;
                 let view =
                     parallax_common::camera::View::window([w, h], [0.4, 0.3], [0.0, 0.0, 0.8]);
+                Ok((tf, tmp, db, placements, view))
+            };
+            if let Some(frames) = prediction {
+                let (tf, _tmp, db, placements, view) = sequence_setup(frames)?;
                 let kappas = [[0.1, 0.3], [0.2, 0.6], [0.5, 1.0], [1.0, 2.0], [2.0, 2.0]];
                 let pts = parallax_backend::bench::run_prediction(
                     &db,
@@ -526,19 +533,7 @@ fn run(cli: Cli) -> Result<()> {
                 return Ok(());
             }
             if let Some(frames) = reconstruction {
-                let tf = parallax_common::tf::TransferFunction::load(&tf)?;
-                let tmp = tempfile::tempdir()?;
-                let db = tmp.path().join("bench.pxo");
-                let mut src = data::open(&volume, None)?;
-                store::import(
-                    src.as_mut(),
-                    &db,
-                    &volume.display().to_string(),
-                    &ImportOptions::default(),
-                )?;
-                let placements = script_placements(frames)?;
-                let view =
-                    parallax_common::camera::View::window([w, h], [0.4, 0.3], [0.0, 0.0, 0.8]);
+                let (tf, _tmp, db, placements, view) = sequence_setup(frames)?;
                 let pts =
                     parallax_backend::bench::run_reconstruction(&db, &tf, &placements, view, &out)?;
                 let full: f64 = pts.iter().map(|p| p.full_ms).sum();

@@ -11,8 +11,6 @@ use parallax_backend::store::{self, BrickEncoding, ImportOptions, OctreeDb};
 use parallax_backend::volume::{MemorySource, Volume, VolumeSource, VoxelType};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::sync::OnceLock;
 
 /// xorshift64*: a small deterministic generator.
 struct Rng(u64);
@@ -295,20 +293,11 @@ fn nifti_headers_and_data() {
     assert!(ok > 100 && refused > 500, "{ok} {refused}");
 }
 
+mod support;
+
 /// The DICOM series and TIFF stacks written by pydicom and tifffile.
-fn inputs() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fuzz-inputs");
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/make_inputs.py");
-        let o = Command::new("/usr/bin/python3")
-            .arg(&script)
-            .arg(&dir)
-            .output()
-            .expect("run /usr/bin/python3");
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        dir
-    })
+fn inputs() -> PathBuf {
+    support::inputs("fuzz-inputs")
 }
 
 #[test]

@@ -7,27 +7,12 @@ use parallax_backend::data::{self, InputOptions};
 use parallax_backend::volume::{Volume, VoxelType};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::OnceLock;
+
+mod support;
 
 /// The inputs, written once per test run.
-fn inputs() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("inputs");
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/make_inputs.py");
-        let o = Command::new("/usr/bin/python3")
-            .arg(&script)
-            .arg(&dir)
-            .output()
-            .expect("run /usr/bin/python3");
-        assert!(
-            o.status.success(),
-            "{} failed (the test command installs python3-pydicom, python3-tifffile, python3-numpy):\n{}",
-            script.display(),
-            String::from_utf8_lossy(&o.stderr)
-        );
-        dir
-    })
+fn inputs() -> PathBuf {
+    support::inputs("inputs")
 }
 
 fn read(path: &Path, opts: &InputOptions) -> Volume {

@@ -35,6 +35,27 @@ fn grey() -> TransferFunction {
     .unwrap()
 }
 
+/// The n³ shells volume (f32) and its database in `dir` (bricks of 16,
+/// full precision).
+fn shells(n: usize, dir: &Path) -> (Volume, std::path::PathBuf) {
+    let vol = Volume::from_fn([n; 3], [1.0; 3], VoxelType::F32, |i, j, k| {
+        synth_value(SynthKind::Shells, i, j, k, n) as f32
+    });
+    let db = dir.join("shells.pxo");
+    store::import(
+        &mut MemorySource::new(&vol),
+        &db,
+        "shells",
+        &ImportOptions {
+            brick: 16,
+            encoding: BrickEncoding::F32,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    (vol, db)
+}
+
 /// The shells volume's outermost surface at value v: the second shell
 /// (radius 0.4, peak 0.75, Gaussian width 0.04 on [−1, 1]) reaches v at
 /// r = 0.4 + 0.04·√(2 ln(0.75/v)) (shells 3 and 4 peak below v).
@@ -48,22 +69,8 @@ fn shell_radius(v: f64) -> f64 {
 #[test]
 fn shell_hits_match_the_analytic_radius() {
     let n = 96;
-    let vol = Volume::from_fn([n; 3], [1.0; 3], VoxelType::F32, |i, j, k| {
-        synth_value(SynthKind::Shells, i, j, k, n) as f32
-    });
     let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("shells.pxo");
-    store::import(
-        &mut MemorySource::new(&vol),
-        &db,
-        "shells",
-        &ImportOptions {
-            brick: 16,
-            encoding: BrickEncoding::F32,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let (vol, db) = shells(n, dir.path());
     // 0.2 m across the volume, seen from 20 m: nearly parallel rays.
     let size = 0.2;
     let placement = Placement {
@@ -236,22 +243,8 @@ fn iso_scenes_are_checked() {
 #[test]
 fn the_prediction_buffer_follows_a_rotation() {
     let n = 64;
-    let vol = Volume::from_fn([n; 3], [1.0; 3], VoxelType::F32, |i, j, k| {
-        synth_value(SynthKind::Shells, i, j, k, n) as f32
-    });
     let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("shells.pxo");
-    store::import(
-        &mut MemorySource::new(&vol),
-        &db,
-        "shells",
-        &ImportOptions {
-            brick: 16,
-            encoding: BrickEncoding::F32,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let (_, db) = shells(n, dir.path());
     let view = View::window([96, 72], [0.4, 0.3], [0.0, 0.0, 0.8]);
     let mut plain = iso_config(0.3);
     plain.accuracy = 1.0;

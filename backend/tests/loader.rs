@@ -584,11 +584,19 @@ fn a_view_looking_away_culls_everything_below_the_root() {
         10,
     );
     assert_eq!(g.stats.nodes, 585);
-    // η > 0 views are not frustum-culled.
+    // η > 0 views are culled by the volume their rays sweep: none of the
+    // aside view's rays reach the volume, all of the ahead view's may.
     away.eta = 1.0;
+    away.eye = [0.2, 0.0, 1.2];
     let h = loader.update(&[away], &placement(), &never_empty, None);
-    assert_eq!(h.stats.culled_frustum, 0);
-    assert!(h.stats.nodes > 1);
+    assert_eq!(h.stats.culled_frustum, 1);
+    assert_eq!(h.stats.nodes, 1);
+    let mut ahead = window(1.0);
+    ahead.eta = 1.0;
+    ahead.eye = [0.2, 0.0, 1.2];
+    let (k, _) = converge(&mut loader, &mut pool, &[ahead], &never_empty, 10);
+    assert_eq!(k.stats.culled_frustum, 0);
+    assert!(k.stats.nodes > 1);
 }
 
 #[test]

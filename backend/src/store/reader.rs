@@ -178,9 +178,9 @@ impl OctreeDb {
         self.index.get(&key).map(|&i| &self.nodes[i])
     }
 
-    /// A stored brick's bytes as they are on disk (checksum checked), or
+    /// A stored brick's record and bytes as they are on disk, unchecked, or
     /// `None` for an empty node.
-    pub fn read_stored(&self, key: NodeKey) -> Result<Option<Vec<u8>>> {
+    fn read_raw(&self, key: NodeKey) -> Result<Option<(&NodeRecord, Vec<u8>)>> {
         let name = self.path.display();
         let rec = self
             .node(key)
@@ -192,9 +192,19 @@ impl OctreeDb {
         self.file
             .read_exact_at(&mut bytes, rec.offset)
             .with_context(|| format!("{name}: brick {key} (offset {}): read failed", rec.offset))?;
+        Ok(Some((rec, bytes)))
+    }
+
+    /// A stored brick's bytes as they are on disk (checksum checked), or
+    /// `None` for an empty node.
+    pub fn read_stored(&self, key: NodeKey) -> Result<Option<Vec<u8>>> {
+        let Some((rec, bytes)) = self.read_raw(key)? else {
+            return Ok(None);
+        };
         anyhow::ensure!(
             codec::checksum(&bytes) == rec.crc,
-            "{name}: brick {key} (offset {}): checksum mismatch",
+            "{}: brick {key} (offset {}): checksum mismatch",
+            self.path.display(),
             rec.offset
         );
         Ok(Some(bytes))
@@ -204,16 +214,9 @@ impl OctreeDb {
     /// An empty (not stored) node decodes to `None`.
     pub fn read_brick(&self, key: NodeKey) -> Result<Option<Vec<f32>>> {
         let name = self.path.display();
-        let rec = self
-            .node(key)
-            .with_context(|| format!("{name}: brick {key} does not exist"))?;
-        if !rec.is_stored() {
+        let Some((rec, bytes)) = self.read_raw(key)? else {
             return Ok(None);
-        }
-        let mut bytes = vec![0u8; rec.len as usize];
-        self.file
-            .read_exact_at(&mut bytes, rec.offset)
-            .with_context(|| format!("{name}: brick {key} (offset {}): read failed", rec.offset))?;
+        };
         let values = codec::decode(
             &bytes,
             rec.crc,

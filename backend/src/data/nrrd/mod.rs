@@ -78,46 +78,40 @@ pub fn open_nrrd(path: &Path) -> Result<RawSource> {
                 .with_context(|| format!("{label}: byte skip {}", header.byte_skip))?;
             Ok(RawSource::from_reader(label, info, false, false, Box::new(reader)).as_text())
         }
-        NrrdEncoding::Bzip2 => {
-            let mut dec = bzip2::read::MultiBzDecoder::new(reader);
-            skip_bytes(&mut dec, header.byte_skip as u64)
-                .with_context(|| format!("{label}: byte skip {}", header.byte_skip))?;
-            Ok(RawSource::from_reader(
-                label,
-                info,
-                header.big_endian,
-                true,
-                Box::new(dec),
-            ))
-        }
+        NrrdEncoding::Bzip2 => stream(
+            label,
+            &header,
+            true,
+            bzip2::read::MultiBzDecoder::new(reader),
+        ),
         NrrdEncoding::Hex => {
-            let mut dec = HexReader {
+            let dec = HexReader {
                 inner: reader,
                 label: label.clone(),
             };
-            skip_bytes(&mut dec, header.byte_skip.max(0) as u64)
-                .with_context(|| format!("{label}: byte skip {}", header.byte_skip))?;
-            Ok(RawSource::from_reader(
-                label,
-                info,
-                header.big_endian,
-                false,
-                Box::new(dec),
-            ))
+            stream(label, &header, false, dec)
         }
-        NrrdEncoding::Gzip => {
-            let mut dec = MultiGzDecoder::new(reader);
-            skip_bytes(&mut dec, header.byte_skip as u64)
-                .with_context(|| format!("{label}: byte skip {}", header.byte_skip))?;
-            Ok(RawSource::from_reader(
-                label,
-                info,
-                header.big_endian,
-                true,
-                Box::new(dec),
-            ))
-        }
+        NrrdEncoding::Gzip => stream(label, &header, true, MultiGzDecoder::new(reader)),
     }
+}
+
+/// A decoding stream (gzip, bzip2, hex) past its byte skip, as a source;
+/// `compressed` streams are read to their end to check their trailer.
+fn stream(
+    label: String,
+    header: &NrrdHeader,
+    compressed: bool,
+    mut dec: impl std::io::Read + Send + 'static,
+) -> Result<RawSource> {
+    skip_bytes(&mut dec, header.byte_skip.max(0) as u64)
+        .with_context(|| format!("{label}: byte skip {}", header.byte_skip))?;
+    Ok(RawSource::from_reader(
+        label,
+        header.info.clone(),
+        header.big_endian,
+        compressed,
+        Box::new(dec),
+    ))
 }
 
 /// Bytes written as pairs of hexadecimal digits (NRRD `encoding: hex`),
