@@ -569,7 +569,7 @@ fn out_of_core_volume_converges_within_budget() {
 
     // Full detail, and a uniformly coarser cut that fits the budget.
     let mut refs = Vec::new();
-    for accuracy in [cfg.accuracy, 1.0] {
+    for accuracy in [cfg.accuracy, 1.25] {
         let big = RenderConfig {
             cpu_cache_mb: 1024.0,
             gpu_cache_mb: 512.0,
@@ -600,7 +600,7 @@ fn out_of_core_volume_converges_within_budget() {
     );
     assert!(refs[1].stats.resident <= slots, "the coarser cut fits");
     let (fit_err, _) = diff(&refs[1].images[0], best);
-    eprintln!("accuracy 1.0 (fits the budget) vs full detail: RMSE {fit_err:.3e}");
+    eprintln!("accuracy 1.25 (fits the budget) vs full detail: RMSE {fit_err:.3e}");
 
     let mut r = renderer(&db, &tf, &cfg);
     r.sync_io = true;
