@@ -132,7 +132,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         } else if (tx.z <= tx.x && tx.z <= tx.y) {
             axis = 2u;
         }
-        if (snap) {
+        if (ISO && snap) {
             let te = select((hi - o) * inv_d, (lo - o) * inv_d, d > vec3<f32>(0.0));
             let te_m = select(te, vec3<f32>(-3.0e38), abs(d) < vec3<f32>(1e-30));
             t = clamp(max(max(te_m.x, te_m.y), te_m.z), entry, t);
@@ -148,7 +148,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // Sampling rate matched to the leaf's level.
             let voxel = frame.spacing.w * f32(1u << (frame.counts.y - level));
             var h = step_factor * voxel;
-            if (sparse) {
+            if (ISO && sparse) {
                 h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slot_range[slot].z));
             }
             if (!have_prev) {

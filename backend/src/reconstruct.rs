@@ -52,6 +52,10 @@ pub fn in_subframe(x: u32, y: u32, k: u32) -> bool {
 
 type Rgba = [f32; 4];
 
+/// One reconstruction phase: the quad offsets of its pixels, and their four
+/// neighbours as two opposite pairs.
+type Phase<'a> = (&'a [(usize, usize)], [[isize; 2]; 4]);
+
 fn smoothstep(x: f32, lo: f32, hi: f32) -> f32 {
     let t = ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
     t * t * (3.0 - 2.0 * t)
@@ -125,18 +129,16 @@ impl ViewHistory {
                 0.0
             }
         };
-        let phases: [(usize, usize, [[isize; 2]; 4]); 2] = [
+        let phases: [Phase; 2] = [
             // Diagonal to the rendered pixels, from the four diagonal ones.
-            (ox ^ 1, oy ^ 1, [[-1, -1], [1, 1], [1, -1], [-1, 1]]),
+            (&[(ox ^ 1, oy ^ 1)], [[-1, -1], [1, 1], [1, -1], [-1, 1]]),
             // Then the others, from their four axis neighbours.
-            (ox ^ 1, oy, [[-1, 0], [1, 0], [0, -1], [0, 1]]),
+            (
+                &[(ox ^ 1, oy), (ox, oy ^ 1)],
+                [[-1, 0], [1, 0], [0, -1], [0, 1]],
+            ),
         ];
-        for (phase, &(px, py, nb)) in phases.iter().enumerate() {
-            let starts: &[(usize, usize)] = if phase == 0 {
-                &[(px, py)]
-            } else {
-                &[(px, py), (ox, oy ^ 1)]
-            };
+        for &(starts, nb) in &phases {
             for &(sx, sy) in starts {
                 for y in (sy..h).step_by(2) {
                     for x in (sx..w).step_by(2) {

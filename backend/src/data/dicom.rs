@@ -32,7 +32,7 @@ use dicom_dictionary_std::tags;
 use dicom_object::{DefaultDicomObject, OpenFileOptions};
 use dicom_pixeldata::{ConvertOptions, ModalityLutOption, PixelDecoder};
 
-use super::check_info;
+use super::{check_finite, check_info};
 use crate::volume::{VolumeInfo, VolumeSource, VoxelType};
 
 /// Relative tolerance on slice spacing: positions are written as decimal
@@ -576,31 +576,20 @@ impl VolumeSource for DicomSource {
     }
 
     fn read_slices(&mut self, out: &mut [f32]) -> Result<()> {
-        let n = self.info.dims[0] * self.info.dims[1];
-        ensure!(
-            out.len().is_multiple_of(n),
-            "{}: read_slices needs whole slices",
-            self.label
-        );
-        for chunk in out.chunks_mut(n) {
-            ensure!(
-                self.next < self.slices.len(),
-                "{}: reading past the last slice",
-                self.label
-            );
-            self.decode_slice(self.next, chunk)?;
-            if let Some(pos) = chunk.iter().position(|v| !v.is_finite()) {
-                bail!(
-                    "{}: voxel ({},{},{}) is not finite after rescaling",
-                    self.label,
-                    pos % self.info.dims[0],
-                    pos / self.info.dims[0],
-                    self.next
-                );
-            }
-            self.next += 1;
-        }
-        Ok(())
+        let mut next = self.next;
+        let res = super::slice_by_slice(&self.label, &self.info, &mut next, out, |k, chunk| {
+            self.decode_slice(k, chunk)?;
+            // Rescaling cannot make NaN from integers, but it can overflow.
+            check_finite(
+                &self.label,
+                self.info.dims,
+                (k * chunk.len()) as u64,
+                chunk,
+                false,
+            )
+        });
+        self.next = next;
+        res
     }
 
     fn describe(&self) -> Option<String> {

@@ -123,6 +123,30 @@ pub fn open(path: &Path, raw: Option<RawParams>) -> Result<Box<dyn VolumeSource 
     }
 }
 
+/// Hands the whole z-slices of `out` to `read`, one at a time with its z
+/// (from `*next`, which it advances), for sources that decode a slice at a
+/// time (a DICOM file, a TIFF page): a partial slice, or one past the last,
+/// is an error naming `label`.
+pub(crate) fn slice_by_slice(
+    label: &str,
+    info: &VolumeInfo,
+    next: &mut usize,
+    out: &mut [f32],
+    mut read: impl FnMut(usize, &mut [f32]) -> Result<()>,
+) -> Result<()> {
+    let n = info.slice_len();
+    anyhow::ensure!(
+        out.len().is_multiple_of(n),
+        "{label}: read_slices needs whole slices"
+    );
+    for chunk in out.chunks_mut(n) {
+        anyhow::ensure!(*next < info.dims[2], "{label}: reading past the last slice");
+        read(*next, chunk)?;
+        *next += 1;
+    }
+    Ok(())
+}
+
 /// "181×217×181 u8": how messages describe a volume's shape.
 pub(crate) fn shape_text(dims: [usize; 3], voxel_type: VoxelType) -> String {
     format!("{}×{}×{} {}", dims[0], dims[1], dims[2], voxel_type.name())

@@ -234,8 +234,8 @@ fn sample_type(dec: &mut TiffDecoder, label: &str) -> Result<VoxelType> {
 }
 
 impl TiffSource {
-    fn read_page(&mut self, out: &mut [f32]) -> Result<()> {
-        let k = self.next;
+    /// Decodes page (slice) `k` into `out`; pages come in order.
+    fn read_page(&mut self, k: usize, out: &mut [f32]) -> Result<()> {
         let nz = self.info.dims[2];
         let (page_label, result) = match &mut self.pages {
             Pages::Files(files) => {
@@ -314,9 +314,7 @@ impl TiffSource {
             (k * n) as u64,
             out,
             self.nan_empty,
-        )?;
-        self.next += 1;
-        Ok(())
+        )
     }
 }
 
@@ -326,21 +324,14 @@ impl VolumeSource for TiffSource {
     }
 
     fn read_slices(&mut self, out: &mut [f32]) -> Result<()> {
-        let n = self.info.dims[0] * self.info.dims[1];
-        ensure!(
-            out.len().is_multiple_of(n),
-            "{}: read_slices needs whole slices",
-            self.label
-        );
-        for chunk in out.chunks_mut(n) {
-            ensure!(
-                self.next < self.info.dims[2],
-                "{}: reading past the last slice",
-                self.label
-            );
-            self.read_page(chunk)?;
-        }
-        Ok(())
+        let label = self.label.clone();
+        let info = self.info.clone();
+        let mut next = self.next;
+        let res = super::slice_by_slice(&label, &info, &mut next, out, |k, chunk| {
+            self.read_page(k, chunk)
+        });
+        self.next = next;
+        res
     }
 
     fn conversion_note(&self) -> Option<String> {

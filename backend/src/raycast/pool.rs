@@ -122,7 +122,9 @@ impl BrickPool {
         // interpolation once the pool has any (`no_data`).
         let has_nan = values.iter().any(|v| v.is_nan());
         self.no_data |= has_nan;
-        let (bytes, range): (Vec<u8>, [f32; 2]) = if self.float {
+        let (bytes, range): (Vec<u8>, [f32; 2]) = if self.float && !has_nan {
+            (bytemuck::cast_slice(values).to_vec(), [0.0, 1.0])
+        } else if self.float {
             let v: Vec<f32> = values
                 .iter()
                 .map(|&v| if v.is_nan() { NO_DATA_VALUE } else { v })
