@@ -4,8 +4,9 @@
 # GPU — and multi-rank tests under mpirun).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-# pydicom and tifffile write the DICOM series and TIFF stacks the input tests read.
-PARALLAX_EXTRA_PACKAGES="python3-pydicom python3-tifffile python3-numpy" . scripts/setup.sh
+# pydicom and tifffile write the DICOM series and TIFF stacks the input tests
+# read; the live page is tested in a real browser (headless Chromium).
+PARALLAX_EXTRA_PACKAGES="python3-pydicom python3-tifffile python3-numpy chromium" . scripts/setup.sh
 cargo build --release --locked 2>&1 | tail -n 3
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT

@@ -2,6 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
+use parallax::launch;
 use parallax_backend::data::{self, synth::SynthKind, RawParams};
 use parallax_backend::store::codec::Codec;
 use parallax_backend::store::{self, info, ImportOptions};
@@ -27,12 +28,13 @@ enum Command {
     Synth {
         /// marschner-lobb | shells | shepp-logan | constant | plane | noise | stiff | ct
         /// (ct: a head in Hounsfield units with scanner noise; use --type i16)
-        kind: String,
+        #[arg(value_parser = synth_kind)]
+        kind: SynthKind,
         #[arg(long)]
         size: usize,
         /// u8 | i8 | u16 | i16 | u32 | i32 | f32 | f64
-        #[arg(long = "type", default_value = "u8")]
-        voxel_type: String,
+        #[arg(long = "type", default_value = "u8", value_parser = voxel_type)]
+        voxel_type: VoxelType,
         #[arg(short, long)]
         output: PathBuf,
     },
@@ -50,8 +52,8 @@ enum Command {
         #[arg(long, allow_hyphen_values = true)]
         empty_below: Option<f32>,
         /// u8 | u16 (quantised against each brick's range) | none (full precision)
-        #[arg(long, default_value = "u8")]
-        quantize: String,
+        #[arg(long, default_value = "u8", value_parser = encoding)]
+        quantize: BrickEncoding,
         /// Brick compression: lz4 | zstd | zstdN (level 1–19), each optionally
         /// +delta (a delta pre-filter) or +auto (per brick, the smaller of
         /// the two).
@@ -61,15 +63,15 @@ enum Command {
         #[arg(long, default_value_t = 2048)]
         memory_mb: usize,
         /// Raw input: X,Y,Z
-        #[arg(long)]
-        dims: Option<String>,
+        #[arg(long, value_parser = list::<usize, 3>)]
+        dims: Option<[usize; 3]>,
         /// Raw input: u8 | i8 | u16 | i16 | u32 | i32 | f32 | f64
-        #[arg(long = "type")]
-        voxel_type: Option<String>,
+        #[arg(long = "type", value_parser = voxel_type)]
+        voxel_type: Option<VoxelType>,
         /// Raw or TIFF input: sx,sy,sz (raw default 1,1,1; TIFF default from
         /// ImageJ metadata, else 1,1,1)
-        #[arg(long)]
-        spacing: Option<String>,
+        #[arg(long, value_parser = list::<f64, 3>)]
+        spacing: Option<[f64; 3]>,
         /// DICOM folder with several series: the SeriesInstanceUID to import
         /// (or its number in the listing)
         #[arg(long)]
@@ -120,6 +122,44 @@ enum Command {
         #[arg(long, default_value_t = parallax_common::protocol::DEFAULT_WATCHDOG.as_secs_f64())]
         watchdog: f64,
     },
+    /// Live: serve a control page and drive the display from a browser
+    /// (embedded, or from rank 0 under `mpirun`). Prints the page's URL,
+    /// with its access token.
+    Serve {
+        #[arg(long)]
+        scene: PathBuf,
+        /// Display file (default: the scene's `display`).
+        #[arg(long)]
+        display: Option<PathBuf>,
+        /// Address to listen on. The default is this machine only; another
+        /// address exposes the page to the network (the token guards it).
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        bind: std::net::SocketAddr,
+        /// The access token (default: a random one, printed in the URL).
+        #[arg(long)]
+        token: Option<String>,
+        /// Also write every frame's images and stats here, as `render` does.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Wait for every posted brick read before each frame (a recording
+        /// then replays bit for bit).
+        #[arg(long)]
+        sync: bool,
+        /// Record the whole session from its first frame into this folder
+        /// (script.toml, written when the session ends).
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Where the page's record control writes its sessions.
+        #[arg(long, default_value = "out/live")]
+        record_dir: PathBuf,
+        /// Embedded back-end threads (default: from the display).
+        #[arg(long)]
+        backends: Option<usize>,
+        /// Seconds to wait for a back end's frame before naming it and
+        /// ending the session (0: wait forever).
+        #[arg(long, default_value_t = parallax_common::protocol::DEFAULT_WATCHDOG.as_secs_f64())]
+        watchdog: f64,
+    },
     /// Error against the exact integral beside frame time for a sweep of
     /// every quality knob: DIR/bench.csv and DIR/bench.svg.
     Bench {
@@ -130,8 +170,8 @@ enum Command {
         #[arg(long, default_value = "configs/tf/colin27-brain.toml")]
         tf: PathBuf,
         /// Image size WxH.
-        #[arg(long, default_value = "160x120")]
-        size: String,
+        #[arg(long, default_value = "160x120", value_parser = size::<u32>)]
+        size: [u32; 2],
         #[arg(long, default_value_t = 3)]
         repeats: usize,
         #[arg(long, default_value = "out/bench")]
@@ -145,8 +185,8 @@ enum Command {
         #[arg(long, value_delimiter = ',', num_args = 1..)]
         codecs: Vec<PathBuf>,
         /// Quantisation of the bricks for --codecs: u8 | u16 | none.
-        #[arg(long, default_value = "u8")]
-        quantize: String,
+        #[arg(long, default_value = "u8", value_parser = encoding)]
+        quantize: BrickEncoding,
         /// Only frame reconstruction against full rendering on a rotation of
         /// 1° per frame, this many frames (DIR/reconstruction.csv).
         #[arg(long)]
@@ -175,11 +215,11 @@ enum Command {
         #[arg(long, default_value_t = 72)]
         projectors: usize,
         /// Per projector, WxH.
-        #[arg(long, default_value = "800x600")]
-        resolution: String,
+        #[arg(long, default_value = "800x600", value_parser = size::<u32>)]
+        resolution: [u32; 2],
         /// Screen size WxH in metres.
-        #[arg(long, default_value = "1.6x0.9")]
-        screen: String,
+        #[arg(long, default_value = "1.6x0.9", value_parser = size::<f64>)]
+        screen: [f64; 2],
         /// Pixel size s0 on the screen (m).
         #[arg(long, default_value_t = 0.0015)]
         pixel_size: f64,
@@ -195,11 +235,11 @@ enum Command {
         #[arg(long, default_value_t = 2.0)]
         distance: f64,
         /// Observer position x,y,z (m).
-        #[arg(long, default_value = "0,0,2", allow_hyphen_values = true)]
-        observer: String,
+        #[arg(long, default_value = "0,0,2", allow_hyphen_values = true, value_parser = list::<f64, 3>)]
+        observer: [f64; 3],
         /// arc | line
-        #[arg(long, default_value = "arc")]
-        layout: String,
+        #[arg(long, default_value = "arc", value_parser = layout)]
+        layout: parallax_common::wall::Layout,
         #[arg(short, long)]
         output: PathBuf,
     },
@@ -218,8 +258,8 @@ enum Command {
         #[arg(long)]
         sweep: Option<usize>,
         /// Output resolution WxH (default: screen size / pixel size, capped).
-        #[arg(long)]
-        resolution: Option<String>,
+        #[arg(long, value_parser = size::<u32>)]
+        resolution: Option<[u32; 2]>,
         #[arg(short, long)]
         output: PathBuf,
     },
@@ -233,8 +273,8 @@ enum Command {
         #[arg(long, default_value_t = 6)]
         rows: u32,
         /// Tile size WxH.
-        #[arg(long, default_value = "210x280")]
-        tile: String,
+        #[arg(long, default_value = "210x280", value_parser = size::<u32>)]
+        tile: [u32; 2],
         /// The device's view cone (degrees).
         #[arg(long, default_value_t = 40.0)]
         cone: f64,
@@ -273,10 +313,7 @@ fn run(cli: Cli) -> Result<()> {
             voxel_type,
             output,
         } => {
-            let kind = SynthKind::parse(&kind).with_context(|| {
-                format!("synth: unknown kind '{kind}' (marschner-lobb, shells, shepp-logan, constant, plane, noise, stiff, ct)")
-            })?;
-            let vt = parse_type(&voxel_type, "--type")?;
+            let vt = voxel_type;
             if size == 0 {
                 bail!("--size 0: a volume needs at least one voxel");
             }
@@ -301,15 +338,11 @@ fn run(cli: Cli) -> Result<()> {
             series,
             nan,
         } => {
-            let encoding = BrickEncoding::parse(&quantize)
-                .with_context(|| format!("--quantize '{quantize}': expected u8, u16 or none"))?;
-            let spacing = spacing
-                .map(|s| parse_triple::<f64>(&s, "--spacing"))
-                .transpose()?;
+            let encoding = quantize;
             let raw = match (dims, voxel_type) {
                 (Some(d), Some(t)) => Some(RawParams {
-                    dims: parse_triple::<usize>(&d, "--dims")?,
-                    voxel_type: parse_type(&t, "--type")?,
+                    dims: d,
+                    voxel_type: t,
                     spacing: spacing.unwrap_or([1.0; 3]),
                     byte_offset,
                     big_endian,
@@ -398,19 +431,44 @@ fn run(cli: Cli) -> Result<()> {
                 verbose: true,
                 watchdog: (watchdog > 0.0).then(|| std::time::Duration::from_secs_f64(watchdog)),
             };
-            let coordinator = if parallax_frontend::cluster::launched_by_mpi() {
-                render_mpi(&opts)?
-            } else {
-                let backends = match backends {
-                    Some(n) => n,
-                    None => display_ranks(&opts)?,
-                };
-                render_embedded(&opts, backends)?;
-                true
-            };
-            if let (true, Some(o)) = (coordinator, out) {
+            let role = launch::session(&opts.scene, opts.display.as_ref(), backends, |t| {
+                parallax_frontend::run(&opts, t).map(|_| ())
+            })?;
+            if let (launch::Role::Coordinator, Some(o)) = (role, out) {
                 println!("images and stats.jsonl in {}", o.display());
             }
+        }
+        Command::Serve {
+            scene,
+            display,
+            bind,
+            token,
+            out,
+            sync,
+            record,
+            record_dir,
+            backends,
+            watchdog,
+        } => {
+            if !(watchdog.is_finite() && watchdog >= 0.0) {
+                bail!("--watchdog {watchdog}: expected seconds ≥ 0 (0: wait forever)");
+            }
+            let opts = parallax_frontend::live::ServeOptions {
+                scene: scene.clone(),
+                display: display.clone(),
+                bind,
+                token,
+                out,
+                sync_io: sync,
+                record,
+                record_dir,
+                watchdog: (watchdog > 0.0).then(|| std::time::Duration::from_secs_f64(watchdog)),
+                ready: None,
+                eye_view: launch::eye_view,
+            };
+            launch::session(&scene, display.as_ref(), backends, |t| {
+                parallax_frontend::live::serve(opts, t)
+            })?;
         }
         Command::Bench {
             volume,
@@ -446,10 +504,7 @@ fn run(cli: Cli) -> Result<()> {
                     .collect())
             };
             if !codecs.is_empty() {
-                let encoding = BrickEncoding::parse(&quantize).with_context(|| {
-                    format!("--quantize '{quantize}': expected u8, u16 or none")
-                })?;
-                let points = parallax_backend::bench::run_codecs(&codecs, encoding, &out)?;
+                let points = parallax_backend::bench::run_codecs(&codecs, quantize, &out)?;
                 println!(
                     "volume                 codec         ratio  encode MB/s  decode MB/s (in)"
                 );
@@ -467,10 +522,7 @@ fn run(cli: Cli) -> Result<()> {
                 println!("wrote {}/codecs.csv", out.display());
                 return Ok(());
             }
-            let (w, h) = size
-                .split_once('x')
-                .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
-                .with_context(|| format!("--size '{size}': expected WxH, e.g. 160x120"))?;
+            let [w, h] = size;
             // What --prediction and --reconstruction share: the transfer
             // function, the volume imported to a temporary database, the
             // script's placements and the desktop view.
@@ -601,9 +653,8 @@ fn run(cli: Cli) -> Result<()> {
             }
             let opts = presets::ImportOptions {
                 range: range
-                    .map(|r| {
-                        let [lo, hi] = parse_list::<f64, 2>(&r, "--range")?;
-                        anyhow::ensure!(lo < hi, "--range {r}: expected lo < hi");
+                    .map(|[lo, hi]| {
+                        anyhow::ensure!(lo < hi, "--range {lo},{hi}: expected lo < hi");
                         Ok((lo, hi))
                     })
                     .transpose()?,
@@ -646,19 +697,15 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let spec = parallax_common::wall::WallSpec {
                 projectors,
-                resolution: parse_pair::<u32>(&resolution, "--resolution")?,
-                screen: parse_pair::<f64>(&screen, "--screen")?,
+                resolution,
+                screen,
                 pixel_size,
                 angular_accuracy_deg: angular_accuracy
                     .unwrap_or_else(|| (fov / projectors.max(1) as f64).max(0.8)),
                 fov_deg: fov,
                 distance,
-                observer: parse_triple::<f64>(&observer, "--observer")?,
-                layout: match layout.as_str() {
-                    "arc" => parallax_common::wall::Layout::Arc,
-                    "line" => parallax_common::wall::Layout::Line,
-                    other => bail!("--layout '{other}': expected arc or line"),
-                },
+                observer,
+                layout,
             };
             spec.write(&output)?;
             println!(
@@ -688,7 +735,7 @@ fn run(cli: Cli) -> Result<()> {
                 eyes = sim::sweep(eyes[0], eyes[1], n);
             }
             let res = match resolution {
-                Some(r) => parse_pair::<u32>(&r, "--resolution")?,
+                Some(r) => r,
                 None => sim::default_resolution(&disp, sim::DEFAULT_MAX_SIDE),
             };
             let (w, h, px) = sim::strip(&disp, &images, &eyes, res)?;
@@ -711,7 +758,7 @@ fn run(cli: Cli) -> Result<()> {
             output,
         } => {
             use parallax_backend::quilt;
-            let tile = parse_pair::<u32>(&tile, "--tile")?;
+
             if cols == 0 || rows == 0 || tile.contains(&0) {
                 bail!("--cols, --rows and --tile must be at least 1");
             }
@@ -758,113 +805,6 @@ fn run(cli: Cli) -> Result<()> {
     Ok(())
 }
 
-/// The cluster mode, under `mpirun -n K`: rank 0 coordinates, ranks 1…K−1
-/// render (one MPI process alone runs the embedded mode).
-/// Returns whether this process was the coordinator.
-fn render_mpi(opts: &parallax_frontend::RunOptions) -> Result<bool> {
-    use mpi::traits::Communicator;
-    let universe = mpi::initialize().context("MPI initialisation failed")?;
-    let world = universe.world();
-    let (rank, size) = (world.rank(), world.size() as usize);
-    tracing::info!(
-        rank,
-        ranks = size,
-        host = %std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default().trim(),
-        "MPI started: {}",
-        if rank == 0 { "coordinator" } else { "back end" }
-    );
-    if size < 2 {
-        drop(universe);
-        return render_embedded(opts, 1).map(|_| true);
-    }
-    // A panic that no back end catches (the coordinator's, an I/O thread's)
-    // must not leave the other ranks waiting for a message that never comes.
-    let default_hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        default_hook(info);
-        if !parallax_backend::node::catching_panics() {
-            eprintln!("error: rank {rank} panicked; ending the MPI job");
-            parallax_frontend::cluster::abort_job(101);
-        }
-    }));
-    if rank == 0 {
-        let mut t = parallax_frontend::cluster::transport(world);
-        match parallax_frontend::run(opts, &mut t) {
-            Ok(_) => Ok(true),
-            // Ranks that stopped answering cannot be told to quit: end the
-            // job so the launcher kills them.
-            Err(e) if e.is::<parallax_common::protocol::Unresponsive>() => {
-                eprintln!("error: {e:#}");
-                parallax_frontend::cluster::abort_job(1)
-            }
-            Err(e) => Err(e),
-        }
-    } else {
-        let mut link = parallax_frontend::cluster::link(world);
-        // A back end's error has been reported to rank 0, which exits
-        // non-zero naming it; the back end itself ends quietly.
-        if let Err(e) = parallax_backend::node::serve(&mut link, size - 1) {
-            eprintln!("rank {rank}: {e:#}");
-        }
-        Ok(false)
-    }
-}
-
-/// The back ends a display asks for: the highest rank its projector files
-/// name, or 1 when none names one.
-fn display_ranks(opts: &parallax_frontend::RunOptions) -> Result<usize> {
-    let scene = parallax_common::config::Scene::load(&opts.scene)?;
-    let display = parallax_frontend::load_display(&scene, opts.display.as_ref())?;
-    Ok(display
-        .projectors
-        .iter()
-        .filter_map(|p| p.rank)
-        .max()
-        .map_or(1, |r| r as usize))
-}
-
-/// The embedded mode: the front end on this thread, the back ends on
-/// threads of their own, talking through the same protocol as over MPI.
-fn render_embedded(opts: &parallax_frontend::RunOptions, backends: usize) -> Result<()> {
-    if backends == 0 {
-        bail!("--backends 0: at least one back end is needed");
-    }
-    let (mut transport, links) = parallax_common::protocol::channels(backends);
-    let threads: Vec<_> = links
-        .into_iter()
-        .map(|mut link| {
-            std::thread::spawn(move || parallax_backend::node::serve(&mut link, backends))
-        })
-        .collect();
-    let result = parallax_frontend::run(opts, &mut transport);
-    drop(transport);
-    if let Err(e) = &result {
-        if e.is::<parallax_common::protocol::Unresponsive>() {
-            // A back end thread that does not answer cannot be joined; the
-            // process ends with the error and takes it along.
-            return result.map(|_| ());
-        }
-    }
-    let mut backend_error = None;
-    for (i, t) in threads.into_iter().enumerate() {
-        match t.join() {
-            Ok(Err(e)) => {
-                backend_error.get_or_insert(e.context(format!("back end {}", i + 1)));
-            }
-            Err(_) => {
-                backend_error.get_or_insert(anyhow::anyhow!("back end {} panicked", i + 1));
-            }
-            Ok(Ok(())) => {}
-        }
-    }
-    match (result, backend_error) {
-        (Err(e), Some(b)) => Err(e.context(format!("{b:#}"))),
-        (Err(e), None) => Err(e),
-        (Ok(_), Some(e)) => Err(e),
-        (Ok(_), None) => Ok(()),
-    }
-}
-
 /// The Vulkan stack wants a per-user runtime folder and prints an error line
 /// on every start without one (a headless shell, a batch job, an MPI rank):
 /// give it one, private to this user, before any GPU work.
@@ -899,36 +839,54 @@ fn init_logging() {
         .try_init();
 }
 
-fn parse_type(s: &str, flag: &str) -> Result<VoxelType> {
-    VoxelType::parse(s)
-        .with_context(|| format!("{flag} '{s}': expected u8, i8, u16, i16, u32, i32, f32 or f64"))
+/// clap value parsers: each argument is parsed into its type, and a bad
+/// value is reported by clap with the flag's name.
+fn synth_kind(s: &str) -> std::result::Result<SynthKind, String> {
+    SynthKind::parse(s).ok_or_else(|| {
+        "expected marschner-lobb, shells, shepp-logan, constant, plane, noise, stiff or ct".into()
+    })
 }
 
-fn parse_pair<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 2]> {
-    let (a, b) = s
-        .split_once('x')
-        .with_context(|| format!("{flag} '{s}': expected AxB"))?;
+fn voxel_type(s: &str) -> std::result::Result<VoxelType, String> {
+    VoxelType::parse(s).ok_or_else(|| "expected u8, i8, u16, i16, u32, i32, f32 or f64".into())
+}
+
+fn encoding(s: &str) -> std::result::Result<BrickEncoding, String> {
+    BrickEncoding::parse(s).ok_or_else(|| "expected u8, u16 or none".into())
+}
+
+fn layout(s: &str) -> std::result::Result<parallax_common::wall::Layout, String> {
+    match s {
+        "arc" => Ok(parallax_common::wall::Layout::Arc),
+        "line" => Ok(parallax_common::wall::Layout::Line),
+        _ => Err("expected arc or line".into()),
+    }
+}
+
+/// `WxH`.
+fn size<T: std::str::FromStr>(s: &str) -> std::result::Result<[T; 2], String> {
+    let (a, b) = s.split_once('x').ok_or("expected WxH, e.g. 160x120")?;
     let p = |t: &str| {
         t.trim()
             .parse::<T>()
-            .map_err(|_| anyhow::anyhow!("{flag} '{s}': '{t}' is not a number"))
+            .map_err(|_| format!("'{t}' is not a number"))
     };
     Ok([p(a)?, p(b)?])
 }
 
-fn parse_triple<T: std::str::FromStr>(s: &str, flag: &str) -> Result<[T; 3]> {
-    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
-    if parts.len() != 3 {
-        bail!("{flag} '{s}': expected three comma-separated numbers");
-    }
-    let mut out = Vec::with_capacity(3);
-    for p in parts {
-        out.push(
-            p.parse::<T>()
-                .map_err(|_| anyhow::anyhow!("{flag} '{s}': '{p}' is not a number"))?,
-        );
-    }
-    Ok(out.try_into().ok().unwrap())
+/// `N` comma-separated numbers.
+fn list<T: std::str::FromStr, const N: usize>(s: &str) -> std::result::Result<[T; N], String> {
+    let v: Vec<T> = s
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<T>()
+                .map_err(|_| format!("'{}' is not a number", t.trim()))
+        })
+        .collect::<std::result::Result<_, _>>()?;
+    let n = v.len();
+    v.try_into()
+        .map_err(|_| format!("expected {N} comma-separated numbers, got {n}"))
 }
 
 fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
@@ -984,8 +942,8 @@ enum TfAction {
         list: bool,
         /// lo,hi: stretch the preset over this data range (as ParaView
         /// applies a preset; needed for normalised colour maps).
-        #[arg(long, allow_hyphen_values = true)]
-        range: Option<String>,
+        #[arg(long, allow_hyphen_values = true, value_parser = list::<f64, 2>)]
+        range: Option<[f64; 2]>,
         /// VTK's scalar opacity unit distance, in data length units
         /// (default: the file's, else 1).
         #[arg(long)]
@@ -1002,18 +960,4 @@ enum TfAction {
         #[arg(short, long, required_unless_present = "list")]
         output: Option<PathBuf>,
     },
-}
-
-fn parse_list<T: std::str::FromStr, const N: usize>(s: &str, flag: &str) -> Result<[T; N]> {
-    let v: Vec<T> = s
-        .split(',')
-        .map(|t| {
-            t.trim()
-                .parse::<T>()
-                .map_err(|_| anyhow::anyhow!("{flag} '{s}': '{t}' is not a number"))
-        })
-        .collect::<Result<_>>()?;
-    let n = v.len();
-    v.try_into()
-        .map_err(|_| anyhow::anyhow!("{flag} '{s}': expected {N} values, got {n}"))
 }

@@ -9,6 +9,7 @@ pub mod index;
 pub mod loader;
 pub mod node;
 pub mod output;
+pub mod pick;
 pub mod quilt;
 pub mod raycast;
 pub mod reconstruct;

@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use parallax_common::camera::View;
 use parallax_common::config::Display;
 use parallax_common::paths::file_in;
-use parallax_common::protocol::{FrameState, FrameStats, Link, Malformed, ToBackend};
+use parallax_common::protocol::{FrameState, FrameStats, Link, Malformed, StreamImage, ToBackend};
 use std::cell::Cell;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
@@ -158,6 +158,10 @@ fn handle(
             let s = setup.as_mut().context("frame before setup")?;
             let mut stats = render_frame(s, &state)?;
             stats.rank = link.rank();
+            if let (Some([origin, dir]), 1) = (state.pick, link.rank()) {
+                stats.pick = s.renderer.pick(&state.placement, origin, dir)?;
+            }
+            stats.rss_bytes = parallax_common::resident_bytes();
             link.reply(&stats)?;
         }
     }
@@ -211,6 +215,20 @@ fn render_frame(s: &mut Setup, state: &FrameState) -> Result<FrameStats> {
             if s.float {
                 output::write_npy(&file_in(&fdir, &format!("{}.npy", p.id), &what)?, w, h, img)?;
             }
+        }
+    }
+    for (img, &pi) in frame.images.iter().zip(&s.mine) {
+        if state.stream.contains(&(pi as u32)) {
+            let [width, height] = s.display.projectors[pi].resolution;
+            stats.images.push(StreamImage {
+                projector: pi as u32,
+                width,
+                height,
+                rgb8: img
+                    .iter()
+                    .flat_map(|p| [p[0], p[1], p[2]].map(output::srgb8))
+                    .collect(),
+            });
         }
     }
     stats.output_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -286,6 +304,8 @@ mod tests {
             render: Default::default(),
             tf_version: 1,
             tools_version: 1,
+            stream: Vec::new(),
+            pick: None,
         });
         let mut link = Scripted {
             inbox: VecDeque::from([

@@ -58,6 +58,9 @@ pub struct Renderer {
     tools: (u64, Vec<Tool>),
     /// Wait for every posted read before refining (deterministic frames).
     pub sync_io: bool,
+    /// The coarse copy of the volume the focus click is picked in, read on
+    /// the first pick.
+    pick_volume: Option<crate::pick::PickVolume>,
 }
 
 /// A rendered frame: one premultiplied RGBA image per view, and its figures.
@@ -154,6 +157,7 @@ impl Renderer {
             prediction: None,
             tools: (0, Vec::new()),
             sync_io: false,
+            pick_volume: None,
         })
     }
 
@@ -191,6 +195,33 @@ impl Renderer {
         // Last frame's visibility was for another transfer function.
         self.last.clear();
         Ok(())
+    }
+
+    /// The display-space point the live coordinator's focus click hits (see
+    /// [`crate::pick::PickVolume::pick`]): the first point along the ray
+    /// origin + t·dir (display space, t ≥ 0) where the accumulated opacity
+    /// under the renderer's current transfer function reaches ½, or `None`
+    /// when the ray misses the volume or never gets that opaque. The coarse
+    /// pick volume (at most [`crate::pick::PICK_VOXELS`] voxels) is read on
+    /// first use and kept. Tools, clip planes and the isosurface mode are not
+    /// taken into account.
+    pub fn pick(
+        &mut self,
+        placement: &Placement,
+        origin: [f64; 3],
+        dir: [f64; 3],
+    ) -> Result<Option<[f64; 3]>> {
+        if self.tf.is_none() {
+            bail!("pick: no transfer function set");
+        }
+        if self.pick_volume.is_none() {
+            let volume = crate::pick::PickVolume::from_db(&self.db, crate::pick::PICK_VOXELS)
+                .context("pick: reading the coarse volume")?;
+            self.pick_volume = Some(volume);
+        }
+        let tf = &self.tf.as_ref().expect("checked above").function;
+        let volume = self.pick_volume.as_ref().expect("read above");
+        Ok(volume.pick(tf, placement, origin, dir, crate::pick::PICK_THRESHOLD))
     }
 
     /// Turns the loader's view-frustum culling on or off (tests compare the

@@ -364,6 +364,23 @@ fn srgb_to_linear(s: f32) -> f32 {
     }
 }
 
+/// sRGB 8-bit RGB pixels (the colour over black, as `write_png` writes and
+/// the live coordinator streams) as linear opaque RGBA, decoded exactly as
+/// [`read_png_linear`] decodes such a PNG.
+pub fn linear_from_srgb8(rgb: &[u8]) -> Vec<[f32; 4]> {
+    let lut: Vec<f32> = (0..256).map(|v| srgb_to_linear(v as f32 / 255.0)).collect();
+    rgb.chunks_exact(3)
+        .map(|c| {
+            [
+                lut[c[0] as usize],
+                lut[c[1] as usize],
+                lut[c[2] as usize],
+                1.0,
+            ]
+        })
+        .collect()
+}
+
 /// Reads a PNG as linear premultiplied RGBA: (width, height, pixels). The
 /// sRGB values are decoded to linear. A PNG without alpha (as `write_png`
 /// writes: the colour over black) is opaque, alpha 1; a PNG with alpha

@@ -19,3 +19,16 @@ pub mod protocol;
 pub mod tf;
 pub mod tools;
 pub mod wall;
+
+/// This process's resident memory (Linux: VmRSS of `/proc/self/status`),
+/// bytes; 0 where it cannot be read.
+pub fn resident_bytes() -> u64 {
+    let Ok(status) = std::fs::read_to_string("/proc/self/status") else {
+        return 0;
+    };
+    status
+        .lines()
+        .find(|l| l.starts_with("VmRSS:"))
+        .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+        .map_or(0, |kib| kib * 1024)
+}

@@ -31,6 +31,26 @@ pub struct FrameState {
     /// Which tool set (sent earlier) to use.
     #[serde(default)]
     pub tools_version: u64,
+    /// The projectors (indices into the display's list) whose images the
+    /// back ends send back with their stats: what the live coordinator
+    /// streams. Empty outside `parallax serve`.
+    #[serde(default)]
+    pub stream: Vec<u32>,
+    /// A focus click: a display-space ray (origin, unit direction) that the
+    /// first back end marches through the volume (`FrameStats::pick`).
+    #[serde(default)]
+    pub pick: Option<[[f64; 3]; 2]>,
+}
+
+/// One streamed projector image: sRGB 8-bit RGB rows, top row first, the
+/// premultiplied colour over black (exactly what the PNG files hold).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StreamImage {
+    /// Index into the display's projectors.
+    pub projector: u32,
+    pub width: u32,
+    pub height: u32,
+    pub rgb8: Vec<u8>,
 }
 
 /// Large state, sent once and again only when it changes.
@@ -103,6 +123,18 @@ pub struct FrameStats {
     /// offset): their parents stay leaves and the run goes on.
     #[serde(default)]
     pub bad_bricks: Vec<String>,
+    /// Resident memory of this back end's process after the frame (bytes;
+    /// in the embedded mode the whole process).
+    #[serde(default)]
+    pub rss_bytes: u64,
+    /// The images of `FrameState::stream` this back end renders (the front
+    /// end takes them out before writing `stats.jsonl`).
+    #[serde(default)]
+    pub images: Vec<StreamImage>,
+    /// The answer to `FrameState::pick`: the display-space point where the
+    /// ray's opacity reaches ½, if any (first back end only).
+    #[serde(default)]
+    pub pick: Option<[f64; 3]>,
 }
 
 /// A limit that stopped refinement short of adequate, which the user can
@@ -338,6 +370,8 @@ mod tests {
             render: RenderConfig::default(),
             tf_version: 1,
             tools_version: 1,
+            stream: Vec::new(),
+            pick: None,
         };
         let msg = ToBackend::Frame(s.clone());
         let b = encode(&msg).unwrap();
@@ -423,6 +457,8 @@ mod tests {
             render: RenderConfig::default(),
             tf_version: 0,
             tools_version: 0,
+            stream: Vec::new(),
+            pick: None,
         };
         t.broadcast(&ToBackend::Frame(f)).unwrap();
         let stats = t.gather().unwrap();

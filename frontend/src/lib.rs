@@ -4,6 +4,7 @@
 //! swap-locked) and writes them to `stats.jsonl`.
 
 pub mod cluster;
+pub mod live;
 pub mod script;
 
 use anyhow::{bail, Context, Result};
@@ -13,7 +14,7 @@ use parallax_common::tf::TransferFunction;
 use script::Script;
 use std::collections::BTreeSet;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Clone, Debug)]
 pub struct RunOptions {
@@ -64,11 +65,20 @@ pub fn load_display(scene: &Scene, over: Option<&PathBuf>) -> Result<Display> {
 /// the end (also after an error, so no back end is left waiting; after a
 /// watchdog error the caller ends the unresponsive ranks).
 pub fn run(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSummary> {
-    transport.set_watchdog(opts.watchdog);
-    let result = run_frames(opts, transport);
-    // Ranks that stopped answering cannot take part in a broadcast either:
-    // the launcher ends them (cluster::abort_job); the others are told to
-    // quit.
+    session(transport, opts.watchdog, |t| run_frames(opts, t))
+}
+
+/// Runs `body` as a session over `transport` with the watchdog set, then
+/// tells the back ends to quit (also after an error, so that none is left
+/// waiting; after a watchdog error the launcher ends the unresponsive
+/// ranks, which cannot take part in a broadcast).
+pub fn session<T>(
+    transport: &mut dyn Transport,
+    watchdog: Option<std::time::Duration>,
+    body: impl FnOnce(&mut dyn Transport) -> Result<T>,
+) -> Result<T> {
+    transport.set_watchdog(watchdog);
+    let result = body(transport);
     let unresponsive =
         matches!(&result, Err(e) if e.is::<parallax_common::protocol::Unresponsive>());
     if !unresponsive {
@@ -77,21 +87,35 @@ pub fn run(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSummar
     result
 }
 
+/// A stats file in `dir` (created), written line by line.
+pub(crate) fn stats_writer(dir: &Path, name: &str) -> Result<std::io::BufWriter<std::fs::File>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let p = dir.join(name);
+    let f = std::fs::File::create(&p).with_context(|| format!("{}: cannot create", p.display()))?;
+    Ok(std::io::BufWriter::new(f))
+}
+
+/// Every back end's figures of one frame as JSON lines, flushed: a run that
+/// is killed keeps the figures of every frame it finished.
+pub(crate) fn write_stats(f: &mut impl Write, stats: &[FrameStats]) -> Result<()> {
+    for s in stats {
+        serde_json::to_writer(&mut *f, s)?;
+        f.write_all(b"\n")?;
+    }
+    f.flush()?;
+    Ok(())
+}
+
 fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSummary> {
     let scene = Scene::load(&opts.scene)?;
     let display = load_display(&scene, opts.display.as_ref())?;
     display.assignment(transport.backends())?;
     let tf = TransferFunction::load(&scene.transfer_function)?;
-    let create = |name: &str| -> Result<Option<std::io::BufWriter<std::fs::File>>> {
-        let Some(dir) = &opts.out else {
-            return Ok(None);
-        };
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create", dir.display()))?;
-        let p = dir.join(name);
-        let f =
-            std::fs::File::create(&p).with_context(|| format!("{}: cannot create", p.display()))?;
-        Ok(Some(std::io::BufWriter::new(f)))
+    let create = |name: &str| {
+        opts.out
+            .as_deref()
+            .map(|d| stats_writer(d, name))
+            .transpose()
     };
     // stats.jsonl: each back end's FrameStats; frontend.jsonl: the
     // coordinator's own figures per frame.
@@ -131,6 +155,8 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             render: scene.render.clone(),
             tf_version,
             tools_version,
+            stream: Vec::new(),
+            pick: None,
         };
         if let Some(sc) = &script {
             let st = sc.at(
@@ -143,6 +169,8 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             state.observer = st.observer;
             state.eta = st.eta;
             state.render.gamma = sc.gamma(frame, scene.render.gamma);
+            state.render.accuracy = sc.accuracy(frame, scene.render.accuracy);
+            state.render.step_factor = sc.step_factor(frame, scene.render.step_factor);
             // Tools are sent when they change, not every frame.
             let now = sc.tools(frame, &scene.tools)?;
             if now != tools {
@@ -187,11 +215,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         // Both files are flushed every frame: a run that is killed keeps
         // the figures of every frame it finished.
         if let Some(f) = stats_file.as_mut() {
-            for s in &stats {
-                serde_json::to_writer(&mut *f, s)?;
-                f.write_all(b"\n")?;
-            }
-            f.flush()?;
+            write_stats(f, &stats)?;
         }
         let wall = *summary.wall_ms.last().unwrap();
         let slowest = stats.iter().map(|s| s.total_ms).fold(0.0, f64::max);
@@ -244,13 +268,13 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
 /// refinement back (each, the first time a back end reports it) and bricks
 /// that could not be read.
 #[derive(Default)]
-struct Notes {
+pub(crate) struct Notes {
     held_back: BTreeSet<HeldBack>,
     bad_bricks: BTreeSet<String>,
 }
 
 impl Notes {
-    fn report(&mut self, stats: &[FrameStats]) {
+    pub(crate) fn report(&mut self, stats: &[FrameStats]) {
         for s in stats {
             for &h in &s.held_back {
                 if self.held_back.insert(h) {

@@ -25,6 +25,8 @@
 //! tool = [{ index = 0, point = [0, 0, 0.05], normal = [0.3, 0, 1], thickness = 0.004 }]
 //! ```
 //!
+//! `accuracy` and `step_factor` set the render knobs of the same names.
+//!
 //! Numbers are interpolated linearly between the keys that set them and held
 //! after the last (a tool's normal is renormalised); a transfer function
 //! switches at its key.
@@ -32,47 +34,82 @@
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::Placement;
 use parallax_common::tools::Tool;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-#[derive(Deserialize)]
+/// A script file as read and as written (a recorded live session).
+#[derive(Debug, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct ScriptFile {
-    frames: Option<u64>,
+pub struct ScriptFile {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames: Option<u64>,
     #[serde(default)]
-    key: Vec<Key>,
+    pub key: Vec<Key>,
 }
 
-#[derive(Clone, Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PlacementKey {
-    center: Option<[f64; 3]>,
-    rotation_deg: Option<[f64; 3]>,
-    size: Option<f64>,
+impl ScriptFile {
+    /// Writes the script as TOML (atomically: an existing file is replaced
+    /// only by a complete one).
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let text = toml::to_string(self).context("cannot write a script")?;
+        parallax_common::atomic::write(path, text.as_bytes())
+    }
 }
 
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct Key {
-    frame: u64,
-    #[serde(default)]
-    placement: PlacementKey,
-    observer: Option<[f64; 3]>,
-    eta: Option<f64>,
-    gamma: Option<f64>,
-    transfer_function: Option<PathBuf>,
-    #[serde(default)]
-    tool: Vec<ToolKey>,
+pub struct PlacementKey {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub center: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rotation_deg: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub size: Option<f64>,
 }
 
-#[derive(Clone, Debug, Deserialize)]
+impl PlacementKey {
+    fn is_empty(&self) -> bool {
+        *self == PlacementKey::default()
+    }
+}
+
+/// One keyframe: the values it sets at `frame` (the others interpolate).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct ToolKey {
-    index: usize,
-    point: Option<[f64; 3]>,
-    normal: Option<[f64; 3]>,
-    thickness: Option<f64>,
-    context: Option<[f64; 2]>,
+pub struct Key {
+    pub frame: u64,
+    #[serde(default, skip_serializing_if = "PlacementKey::is_empty")]
+    pub placement: PlacementKey,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub observer: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub eta: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gamma: Option<f64>,
+    /// `render.accuracy` (pixels per voxel, as in the scene).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub accuracy: Option<f64>,
+    /// `render.step_factor`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub step_factor: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub transfer_function: Option<PathBuf>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tool: Vec<ToolKey>,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToolKey {
+    pub index: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub point: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub normal: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub thickness: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub context: Option<[f64; 2]>,
 }
 
 /// The keyframed pose and parameters of one tool.
@@ -115,6 +152,8 @@ pub struct Script {
     observer: Track<3>,
     eta: Track<1>,
     gamma: Track<1>,
+    accuracy: Track<1>,
+    step_factor: Track<1>,
     /// (first frame, file) of each transfer function switch.
     tfs: Vec<(u64, PathBuf)>,
     /// Per tool index of the scene.
@@ -150,6 +189,8 @@ impl Script {
             observer: Track::default(),
             eta: Track::default(),
             gamma: Track::default(),
+            accuracy: Track::default(),
+            step_factor: Track::default(),
             tfs: Vec::new(),
             tools: Vec::new(),
             name: name.to_string(),
@@ -201,6 +242,18 @@ impl Script {
                 }
                 s.gamma.keys.push((k.frame, [g]));
             }
+            if let Some(a) = k.accuracy {
+                if !(a.is_finite() && a > 0.0) {
+                    bail!("{at}: accuracy must be > 0 (got {a})");
+                }
+                s.accuracy.keys.push((k.frame, [a]));
+            }
+            if let Some(f) = k.step_factor {
+                if !(f.is_finite() && f > 0.0) {
+                    bail!("{at}: step_factor must be > 0 (got {f})");
+                }
+                s.step_factor.keys.push((k.frame, [f]));
+            }
             for t in &k.tool {
                 let at = format!("{at}: tool {}", t.index);
                 if s.tools.len() <= t.index {
@@ -245,6 +298,17 @@ impl Script {
     /// MImDA's γ at `frame` (the scene's where the script sets none).
     pub fn gamma(&self, frame: u64, scene: f64) -> f64 {
         self.gamma.at(frame, [scene])[0]
+    }
+
+    /// `render.accuracy` at `frame` (the scene's where the script sets none).
+    pub fn accuracy(&self, frame: u64, scene: f64) -> f64 {
+        self.accuracy.at(frame, [scene])[0]
+    }
+
+    /// `render.step_factor` at `frame` (the scene's where the script sets
+    /// none).
+    pub fn step_factor(&self, frame: u64, scene: f64) -> f64 {
+        self.step_factor.at(frame, [scene])[0]
     }
 
     /// The tools at `frame`: the scene's, moved and changed as the keys say.

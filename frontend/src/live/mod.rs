@@ -1,0 +1,570 @@
+//! The live coordinator (`parallax serve`): a page in a browser drives the
+//! display while the back ends render (G10 §6: people move the scene and
+//! its tools in front of the wall). The protocol is in
+//! `docs/live-protocol.md`.
+//!
+//! Threads: the coordinator's own thread runs the frame loop over the
+//! [`Transport`] (blocking, as in `render`: MPI stays on one thread); a
+//! small tokio runtime serves the page and the WebSockets. They share one
+//! [`LiveState`] under a mutex: a client's change bumps its version and
+//! wakes the frame loop, which renders while the state changed or the cut
+//! has not converged and otherwise sleeps on a condition variable (no CPU).
+//! Frames reach the clients through a `watch` channel, which holds only the
+//! newest: a slow or vanished client misses frames, never stalls the loop.
+
+mod record;
+mod state;
+
+pub use state::{ClientMsg, LiveState};
+
+use crate::{session, Notes};
+use anyhow::{Context, Result};
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::{Query, State};
+use axum::http::StatusCode;
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::get;
+use axum::Router;
+use futures_util::{SinkExt, StreamExt};
+use parallax_common::config::{Display, Scene};
+use parallax_common::protocol::{FrameState, StreamImage, ToBackend, Transport};
+use parallax_common::tf::TransferFunction;
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+use tokio::sync::{broadcast, watch};
+
+/// The page, shipped inside the binary.
+const PAGE: &str = include_str!("page.html");
+
+/// What an eye at a position sees on a light field display, from every
+/// projector's streamed image (the launcher supplies the simulator):
+/// width, height and sRGB 8-bit RGB.
+pub type EyeView = fn(&Display, &[StreamImage], [f64; 3]) -> Result<(u32, u32, Vec<u8>)>;
+
+pub struct ServeOptions {
+    pub scene: PathBuf,
+    pub display: Option<PathBuf>,
+    pub bind: SocketAddr,
+    /// The access token (None: a random one).
+    pub token: Option<String>,
+    /// Back ends also write every frame's images here (and the coordinator
+    /// `stats.jsonl`), as `render` does.
+    pub out: Option<PathBuf>,
+    pub sync_io: bool,
+    /// Record the whole session, from frame 0, into this folder.
+    pub record: Option<PathBuf>,
+    /// Where the page's record control writes.
+    pub record_dir: PathBuf,
+    pub watchdog: Option<Duration>,
+    /// Told the page's URL once the server listens.
+    pub ready: Option<std::sync::mpsc::Sender<String>>,
+    pub eye_view: EyeView,
+}
+
+/// Frames rendered after a change before the loop idles even if the cut has
+/// not converged (a pool that cannot hold the cut).
+const SETTLE_FRAMES: u64 = crate::CONVERGE_FRAMES;
+
+/// A client's send that takes longer than this drops the client.
+const SEND_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// One streamed frame: its header (JSON) and its PNG.
+type Packet = (String, Vec<u8>);
+
+/// What the clients and the frame loop share.
+struct Shared {
+    live: Mutex<Live>,
+    wake: Condvar,
+    /// The newest state message (JSON).
+    state_tx: watch::Sender<Arc<String>>,
+    /// The newest frame: its header (JSON) and PNG.
+    frame_tx: watch::Sender<Option<Arc<Packet>>>,
+    /// Messages for every client (a recording written, a failed focus).
+    notice_tx: broadcast::Sender<String>,
+    /// Set once when the session ends, with why.
+    ended_tx: watch::Sender<Option<String>>,
+    token: String,
+    hello: String,
+    /// Clients connected now (the session's end waits for each to be told).
+    clients: std::sync::atomic::AtomicUsize,
+}
+
+struct Live {
+    state: LiveState,
+    version: u64,
+    /// A focus click's ray, for the next frame.
+    pick: Option<[[f64; 3]; 2]>,
+    quit: bool,
+}
+
+impl Shared {
+    fn state_message(live: &Live) -> String {
+        serde_json::json!({"type": "state", "version": live.version, "state": live.state})
+            .to_string()
+    }
+
+    /// Applies one client message; the error is the reply.
+    fn apply(&self, text: &str, display: &Display) -> std::result::Result<(), String> {
+        let msg: ClientMsg = serde_json::from_str(text).map_err(|e| format!("refused: {e}"))?;
+        let mut live = self.live.lock().unwrap();
+        match msg {
+            ClientMsg::Quit => live.quit = true,
+            ClientMsg::Focus { x, y } => {
+                let ray = live
+                    .state
+                    .focus_ray(display, x, y)
+                    .map_err(|e| format!("refused: focus: {e}"))?;
+                live.pick = Some(ray);
+            }
+            other => {
+                let mut next = live.state.clone();
+                next.apply(other, display)
+                    .map_err(|e| format!("refused: {e:#}"))?;
+                if next == live.state {
+                    return Ok(());
+                }
+                live.state = next;
+                live.version += 1;
+                self.state_tx
+                    .send_replace(Arc::new(Self::state_message(&live)));
+            }
+        }
+        self.wake.notify_all();
+        Ok(())
+    }
+}
+
+/// Runs a live session over `transport` until a client quits, the process
+/// is interrupted, or a back end fails (the error names it).
+pub fn serve(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
+    let watchdog = opts.watchdog;
+    session(transport, watchdog, |t| run(opts, t))
+}
+
+fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
+    let scene = Scene::load(&opts.scene)?;
+    let display = crate::load_display(&scene, opts.display.as_ref())?;
+    display.assignment(transport.backends())?;
+    let tf = TransferFunction::load(&scene.transfer_function)?;
+    transport.broadcast(&ToBackend::Setup {
+        scene: scene.clone(),
+        display: display.clone(),
+        out_dir: opts.out.clone(),
+        float: false,
+        sync_io: opts.sync_io,
+    })?;
+    transport.broadcast(&ToBackend::TransferFunction {
+        version: 1,
+        tf: tf.clone(),
+    })?;
+    transport.broadcast(&ToBackend::Tools {
+        version: 1,
+        tools: scene.tools.clone(),
+    })?;
+    let state = LiveState::from_scene(&scene, &display, tf);
+    let token = match &opts.token {
+        Some(t) if t.is_empty() || !t.chars().all(|c| c.is_ascii_alphanumeric()) => {
+            anyhow::bail!("--token: expected letters and digits")
+        }
+        Some(t) => t.clone(),
+        None => random_token()?,
+    };
+    let live = Live {
+        state,
+        version: 1,
+        pick: None,
+        quit: false,
+    };
+    let shared = Arc::new(Shared {
+        state_tx: watch::channel(Arc::new(Shared::state_message(&live))).0,
+        live: Mutex::new(live),
+        wake: Condvar::new(),
+        frame_tx: watch::channel(None).0,
+        notice_tx: broadcast::channel(16).0,
+        ended_tx: watch::channel(None).0,
+        token: token.clone(),
+        hello: state::hello(&opts.scene, &scene, &display, &opts.record_dir).to_string(),
+        clients: Default::default(),
+    });
+
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .thread_name("parallax-live")
+        .enable_all()
+        .build()
+        .context("cannot start the live server's runtime")?;
+    let listener = rt
+        .block_on(tokio::net::TcpListener::bind(opts.bind))
+        .with_context(|| format!("--bind {}: cannot listen", opts.bind))?;
+    let addr = listener.local_addr()?;
+    let url = format!("http://{addr}/?token={token}");
+    println!("serving {} on {url}", opts.scene.display());
+    if !addr.ip().is_loopback() {
+        eprintln!(
+            "note: the page is reachable from the network at {addr}; only the token guards it"
+        );
+    }
+    if let Some(r) = &opts.ready {
+        let _ = r.send(url);
+    }
+    let app = Router::new()
+        .route("/", get(page))
+        .route("/ws", get(ws_upgrade))
+        .with_state(AppState {
+            shared: shared.clone(),
+            display: Arc::new(display.clone()),
+        });
+    let mut ended_rx = shared.ended_tx.subscribe();
+    rt.spawn(async move {
+        let stop = async move {
+            let _ = ended_rx.wait_for(|e| e.is_some()).await;
+        };
+        if let Err(e) = axum::serve(listener, app)
+            .with_graceful_shutdown(stop)
+            .await
+        {
+            eprintln!("error: live server: {e}");
+        }
+    });
+    {
+        let shared = shared.clone();
+        rt.spawn(async move {
+            if tokio::signal::ctrl_c().await.is_ok() {
+                shared.live.lock().unwrap().quit = true;
+                shared.wake.notify_all();
+            }
+        });
+    }
+
+    let result = frame_loop(&opts, &scene, &display, &shared, transport);
+    let why = match &result {
+        Ok(()) => "the session ended".to_string(),
+        Err(e) => format!("the session ended: {e:#}"),
+    };
+    shared.ended_tx.send_replace(Some(why));
+    // Every client is told why before the server stops.
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while shared.clients.load(std::sync::atomic::Ordering::SeqCst) > 0 && Instant::now() < deadline
+    {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    rt.shutdown_timeout(Duration::from_secs(2));
+    result
+}
+
+/// The frame loop: renders while something changed or the cut has not
+/// converged, sleeps otherwise.
+fn frame_loop(
+    opts: &ServeOptions,
+    scene: &Scene,
+    display: &Display,
+    shared: &Shared,
+    transport: &mut dyn Transport,
+) -> Result<()> {
+    let mut notes = Notes::default();
+    let mut stats_file = match &opts.out {
+        Some(dir) => Some(crate::stats_writer(dir, "stats.jsonl")?),
+        None => None,
+    };
+    let mut rendered_version = 0u64;
+    let mut since_change = 0u64;
+    let mut converged = false;
+    let mut sent_tf: Option<TransferFunction> = None;
+    let mut tf_version = 1u64;
+    let mut sent_tools = scene.tools.clone();
+    let mut tools_version = 1u64;
+    let mut recorder = match &opts.record {
+        Some(dir) => Some(record::Recorder::start(dir.clone(), 0, false)?),
+        None => None,
+    };
+    let mut page_recordings = 0u32;
+    for frame in 0u64.. {
+        let (state, version, pick) = {
+            let mut live = shared.live.lock().unwrap();
+            while !live.quit
+                && live.version == rendered_version
+                && live.pick.is_none()
+                && (converged || since_change >= SETTLE_FRAMES)
+            {
+                live = shared.wake.wait(live).unwrap();
+            }
+            if live.quit {
+                break;
+            }
+            (live.state.clone(), live.version, live.pick.take())
+        };
+        if version != rendered_version {
+            since_change = 0;
+        }
+        // The page's record control.
+        match (&recorder, state.recording) {
+            (None, true) => {
+                page_recordings += 1;
+                let dir = next_session_dir(&opts.record_dir, page_recordings)?;
+                recorder = Some(record::Recorder::start(dir, frame, true)?);
+            }
+            (Some(r), false) if r.started_by_page() => {
+                let done = recorder.take().unwrap().finish()?;
+                let _ = shared.notice_tx.send(done.message());
+            }
+            _ => {}
+        }
+        if sent_tf.as_ref() != Some(&state.tf) {
+            if sent_tf.is_some() {
+                tf_version += 1;
+                transport.broadcast(&ToBackend::TransferFunction {
+                    version: tf_version,
+                    tf: state.tf.clone(),
+                })?;
+            }
+            sent_tf = Some(state.tf.clone());
+        }
+        if state.tools != sent_tools {
+            tools_version += 1;
+            transport.broadcast(&ToBackend::Tools {
+                version: tools_version,
+                tools: state.tools.clone(),
+            })?;
+            sent_tools = state.tools.clone();
+        }
+        let mut render = scene.render.clone();
+        render.accuracy = state.accuracy;
+        render.step_factor = state.step_factor;
+        render.gamma = state.gamma;
+        let fs = FrameState {
+            frame,
+            placement: state.placement,
+            observer: display.observer.position,
+            eta: state.eta,
+            render,
+            tf_version,
+            tools_version,
+            stream: state.streamed(display),
+            pick,
+        };
+        let start = Instant::now();
+        transport.broadcast(&ToBackend::Frame(fs.clone()))?;
+        let mut stats = transport.gather()?;
+        let wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        if let Some(bad) = stats.iter().find(|s| s.error.is_some()) {
+            anyhow::bail!(
+                "back end {} failed: {}",
+                bad.rank,
+                bad.error.as_deref().unwrap_or("")
+            );
+        }
+        notes.report(&stats);
+        rendered_version = version;
+        since_change += 1;
+        converged = stats.iter().all(|s| s.adequate && s.uploaded == 0);
+        let images: Vec<StreamImage> = stats
+            .iter_mut()
+            .flat_map(|s| std::mem::take(&mut s.images))
+            .collect();
+        let picked = stats.iter().find_map(|s| s.pick);
+        if let Some(f) = stats_file.as_mut() {
+            crate::write_stats(f, &stats)?;
+        }
+        let (w, h, rgb) = state.image(display, &images, opts.eye_view)?;
+        let png = encode_png(w, h, &rgb)?;
+        if let Some(r) = recorder.as_mut() {
+            r.frame(&fs, &state, &png)?;
+        }
+        let header = serde_json::json!({
+            "type": "frame",
+            "frame": frame,
+            "version": version,
+            "width": w,
+            "height": h,
+            "wall_ms": wall_ms,
+            "converged": converged,
+            "coordinator_rss_bytes": parallax_common::resident_bytes(),
+            "stats": stats,
+        });
+        shared
+            .frame_tx
+            .send_replace(Some(Arc::new((header.to_string(), png))));
+        if pick.is_some() {
+            focus(shared, picked);
+        }
+    }
+    if let Some(r) = recorder.take() {
+        let done = r.finish()?;
+        println!("{}", done.summary());
+    }
+    if let Some(f) = stats_file {
+        f.into_inner()
+            .map_err(|e| anyhow::anyhow!("writing stats: {}", e.error()))?;
+    }
+    Ok(())
+}
+
+/// Moves the volume along z so the picked point lies on the screen plane,
+/// where a light field display is sharpest (G10 §3: s(z) is smallest at
+/// z = 0).
+fn focus(shared: &Shared, picked: Option<[f64; 3]>) {
+    let Some(p) = picked else {
+        let msg =
+            serde_json::json!({"type": "error", "message": "focus: nothing visible at that point"});
+        let _ = shared.notice_tx.send(msg.to_string());
+        return;
+    };
+    let mut live = shared.live.lock().unwrap();
+    live.state.placement.center[2] -= p[2];
+    live.version += 1;
+    shared
+        .state_tx
+        .send_replace(Arc::new(Shared::state_message(&live)));
+    drop(live);
+    shared.wake.notify_all();
+}
+
+fn next_session_dir(root: &std::path::Path, n: u32) -> Result<PathBuf> {
+    std::fs::create_dir_all(root).with_context(|| format!("{}: cannot create", root.display()))?;
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    Ok(root.join(format!("session-{stamp}-{n}")))
+}
+
+fn encode_png(w: u32, h: u32, rgb: &[u8]) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    let mut enc = png::Encoder::new(&mut out, w, h);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_compression(png::Compression::Fast);
+    let mut wr = enc.write_header()?;
+    wr.write_image_data(rgb)?;
+    wr.finish()?;
+    Ok(out)
+}
+
+fn random_token() -> Result<String> {
+    use std::io::Read;
+    let mut b = [0u8; 16];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| f.read_exact(&mut b))
+        .context("/dev/urandom: cannot read a token")?;
+    Ok(b.iter().map(|x| format!("{x:02x}")).collect())
+}
+
+#[derive(Clone)]
+struct AppState {
+    shared: Arc<Shared>,
+    display: Arc<Display>,
+}
+
+fn authorised(app: &AppState, q: &HashMap<String, String>) -> bool {
+    q.get("token").is_some_and(|t| t == &app.shared.token)
+}
+
+async fn page(State(app): State<AppState>, Query(q): Query<HashMap<String, String>>) -> Response {
+    if !authorised(&app, &q) {
+        return (
+            StatusCode::FORBIDDEN,
+            "parallax: open the URL printed at start (it carries the access token)",
+        )
+            .into_response();
+    }
+    Html(PAGE).into_response()
+}
+
+async fn ws_upgrade(
+    State(app): State<AppState>,
+    Query(q): Query<HashMap<String, String>>,
+    ws: WebSocketUpgrade,
+) -> Response {
+    if !authorised(&app, &q) {
+        return (StatusCode::FORBIDDEN, "parallax: wrong or missing token").into_response();
+    }
+    ws.on_upgrade(move |socket| client(socket, app))
+}
+
+/// One client: its messages change the shared state; it gets every state
+/// change, the newest frame whenever there is one, and the notices.
+async fn client(socket: WebSocket, app: AppState) {
+    use std::sync::atomic::Ordering;
+    /// Counts the client out however its task ends.
+    struct Connected(Arc<Shared>);
+    impl Drop for Connected {
+        fn drop(&mut self) {
+            self.0.clients.fetch_sub(1, Ordering::SeqCst);
+        }
+    }
+    app.shared.clients.fetch_add(1, Ordering::SeqCst);
+    let _connected = Connected(app.shared.clone());
+    let shared = app.shared.clone();
+    let (mut tx, mut rx) = socket.split();
+    let mut state_rx = shared.state_tx.subscribe();
+    let mut frame_rx = shared.frame_tx.subscribe();
+    let mut ended_rx = shared.ended_tx.subscribe();
+    let mut notice_rx = shared.notice_tx.subscribe();
+    let state_now = state_rx.borrow_and_update().clone();
+    let frame_now = frame_rx.borrow_and_update().clone();
+    let mut outbox = vec![
+        Message::Text(shared.hello.clone().into()),
+        Message::Text(state_now.as_str().into()),
+    ];
+    if let Some(f) = frame_now {
+        outbox.push(Message::Text(f.0.clone().into()));
+        outbox.push(Message::Binary(f.1.clone().into()));
+    }
+    loop {
+        for m in outbox.drain(..) {
+            match tokio::time::timeout(SEND_TIMEOUT, tx.send(m)).await {
+                Ok(Ok(())) => {}
+                _ => return,
+            }
+        }
+        tokio::select! {
+            m = rx.next() => match m {
+                Some(Ok(Message::Text(t))) => {
+                    // The lock is held only for moments (the frame loop
+                    // waits on the condition variable without it).
+                    if let Err(e) = shared.apply(t.as_str(), &app.display) {
+                        outbox.push(error_message(&e));
+                    }
+                }
+                Some(Ok(Message::Binary(_))) => outbox.push(error_message("refused: binary messages are not part of the protocol")),
+                Some(Ok(Message::Close(_))) | None | Some(Err(_)) => return,
+                Some(Ok(_)) => {}
+            },
+            r = state_rx.changed() => {
+                if r.is_err() { return; }
+                let s = state_rx.borrow_and_update().clone();
+                outbox.push(Message::Text(s.as_str().into()));
+            }
+            r = frame_rx.changed() => {
+                if r.is_err() { return; }
+                let f = frame_rx.borrow_and_update().clone();
+                if let Some(f) = f {
+                    outbox.push(Message::Text(f.0.clone().into()));
+                    outbox.push(Message::Binary(f.1.clone().into()));
+                }
+            }
+            n = notice_rx.recv() => match n {
+                Ok(n) => outbox.push(Message::Text(n.into())),
+                Err(broadcast::error::RecvError::Lagged(_)) => {}
+                Err(_) => return,
+            },
+            _ = ended_rx.changed() => {
+                let why = ended_rx.borrow().clone().unwrap_or_default();
+                let m = serde_json::json!({"type": "ended", "message": why}).to_string();
+                let _ = tokio::time::timeout(SEND_TIMEOUT, tx.send(Message::Text(m.into()))).await;
+                let _ = tx.close().await;
+                return;
+            }
+        }
+    }
+}
+
+fn error_message(e: &str) -> Message {
+    Message::Text(
+        serde_json::json!({"type": "error", "message": e})
+            .to_string()
+            .into(),
+    )
+}

@@ -1,0 +1,253 @@
+//! Recording a live session: every rendered frame's state becomes a key of
+//! an interaction script that `parallax render --script` replays frame for
+//! frame (a recording from the session's first frame, with `--sync` on
+//! both sides, replays bit for bit: the cut is refined from the same
+//! states in the same order), and the streamed images become a movie (MP4
+//! through ffmpeg when it is installed, else an animated GIF).
+
+use super::LiveState;
+use crate::script::{Key, PlacementKey, ScriptFile, ToolKey};
+use anyhow::{Context, Result};
+use parallax_common::protocol::FrameState;
+use parallax_common::tf::TransferFunction;
+use parallax_common::tools::Tool;
+use std::path::{Path, PathBuf};
+
+/// One recorded frame: what the script must reproduce.
+#[derive(Clone, Debug, PartialEq)]
+struct Recorded {
+    state: FrameState,
+    tf: TransferFunction,
+    tools: Vec<Tool>,
+}
+
+pub struct Recorder {
+    dir: PathBuf,
+    first: u64,
+    /// Started from the page (a movie is written too, and the page's
+    /// control stops it).
+    page: bool,
+    frames: Vec<Recorded>,
+    movie_frames: u32,
+}
+
+/// What a finished recording wrote.
+pub struct Done {
+    pub script: PathBuf,
+    pub movie: Option<PathBuf>,
+    pub frames: usize,
+}
+
+impl Done {
+    pub fn message(&self) -> String {
+        serde_json::json!({
+            "type": "recorded",
+            "script": self.script.display().to_string(),
+            "movie": self.movie.as_ref().map(|m| m.display().to_string()),
+            "frames": self.frames,
+        })
+        .to_string()
+    }
+
+    pub fn summary(&self) -> String {
+        format!(
+            "recorded {} frames: {}{}",
+            self.frames,
+            self.script.display(),
+            self.movie
+                .as_ref()
+                .map(|m| format!(", {}", m.display()))
+                .unwrap_or_default()
+        )
+    }
+}
+
+impl Recorder {
+    pub fn start(dir: PathBuf, first: u64, page: bool) -> Result<Self> {
+        std::fs::create_dir_all(dir.join("frames"))
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        Ok(Recorder {
+            dir,
+            first,
+            page,
+            frames: Vec::new(),
+            movie_frames: 0,
+        })
+    }
+
+    pub fn started_by_page(&self) -> bool {
+        self.page
+    }
+
+    /// Records one rendered frame and its streamed image (PNG).
+    pub fn frame(&mut self, fs: &FrameState, live: &LiveState, png: &[u8]) -> Result<()> {
+        let mut state = fs.clone();
+        state.frame -= self.first;
+        self.frames.push(Recorded {
+            state,
+            tf: live.tf.clone(),
+            tools: live.tools.clone(),
+        });
+        let p = self
+            .dir
+            .join("frames")
+            .join(format!("{:05}.png", self.movie_frames));
+        std::fs::write(&p, png).with_context(|| format!("{}: cannot write", p.display()))?;
+        self.movie_frames += 1;
+        Ok(())
+    }
+
+    pub fn finish(self) -> Result<Done> {
+        let script = self.dir.join("script.toml");
+        let file = script_of(&self.frames, &self.dir)?;
+        file.write(&script)?;
+        let movie = if self.page && self.movie_frames > 0 {
+            Some(write_movie(&self.dir)?)
+        } else {
+            None
+        };
+        Ok(Done {
+            script,
+            movie,
+            frames: self.frames.len(),
+        })
+    }
+}
+
+/// The whole state of a frame as one key (every later value interpolates
+/// from equal keys, or switches between adjacent frames: exact).
+fn key_of(r: &Recorded, tf_file: Option<PathBuf>) -> Key {
+    let s = &r.state;
+    Key {
+        frame: s.frame,
+        placement: PlacementKey {
+            center: Some(s.placement.center),
+            rotation_deg: Some(s.placement.rotation_deg),
+            size: Some(s.placement.size),
+        },
+        observer: Some(s.observer),
+        eta: Some(s.eta),
+        gamma: Some(s.render.gamma),
+        accuracy: Some(s.render.accuracy),
+        step_factor: Some(s.render.step_factor),
+        transfer_function: tf_file,
+        tool: r
+            .tools
+            .iter()
+            .enumerate()
+            .filter_map(|(index, t)| match t {
+                Tool::ClipPlane(c) => Some(ToolKey {
+                    index,
+                    point: Some(c.point),
+                    normal: Some(c.normal),
+                    thickness: Some(c.thickness),
+                    context: Some(c.context),
+                }),
+                _ => None,
+            })
+            .collect(),
+    }
+}
+
+/// Keys where the state changes, each preceded by a key holding the old
+/// state on the frame before (linear interpolation between equal keys is
+/// exact, so every frame replays as recorded). Transfer functions are
+/// written beside the script, one file per change.
+fn script_of(frames: &[Recorded], dir: &Path) -> Result<ScriptFile> {
+    let mut keys: Vec<Key> = Vec::new();
+    let mut tfs = 0;
+    let same = |a: &Recorded, b: &Recorded| {
+        let mut sa = a.state.clone();
+        sa.frame = b.state.frame;
+        sa.tf_version = b.state.tf_version;
+        sa.tools_version = b.state.tools_version;
+        sa.stream.clone_from(&b.state.stream);
+        sa.pick = b.state.pick;
+        sa == b.state && a.tf == b.tf && a.tools == b.tools
+    };
+    for (i, r) in frames.iter().enumerate() {
+        let changed = i == 0 || !same(&frames[i - 1], r);
+        if !changed {
+            continue;
+        }
+        if i > 0 && keys.last().is_some_and(|k| k.frame + 1 < r.state.frame) {
+            keys.push(key_of(&frames[i - 1], None));
+        }
+        let tf_file = if i == 0 || frames[i - 1].tf != r.tf {
+            tfs += 1;
+            let name = format!("tf-{tfs:03}.toml");
+            let text = toml::to_string(&r.tf).context("cannot write a transfer function")?;
+            parallax_common::atomic::write(&dir.join(&name), text.as_bytes())?;
+            Some(PathBuf::from(name))
+        } else {
+            None
+        };
+        keys.push(key_of(r, tf_file));
+    }
+    Ok(ScriptFile {
+        frames: Some(frames.len() as u64),
+        key: keys,
+    })
+}
+
+/// The recorded frames as a movie: MP4 through ffmpeg when it is on the
+/// PATH, else an animated GIF (frames of another size than the first, after
+/// the output was switched, are left out of the GIF).
+fn write_movie(dir: &Path) -> Result<PathBuf> {
+    let frames = dir.join("frames");
+    let mp4 = dir.join("movie.mp4");
+    let ffmpeg = std::process::Command::new("ffmpeg")
+        .args(["-loglevel", "error", "-y", "-framerate", "30", "-i"])
+        .arg(frames.join("%05d.png"))
+        .args([
+            "-vf",
+            "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+            "-pix_fmt",
+            "yuv420p",
+        ])
+        .arg(&mp4)
+        .status();
+    if ffmpeg.is_ok_and(|s| s.success()) {
+        return Ok(mp4);
+    }
+    let gif_path = dir.join("movie.gif");
+    let mut names: Vec<PathBuf> = std::fs::read_dir(&frames)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "png"))
+        .collect();
+    names.sort();
+    let Some(first) = names.first() else {
+        anyhow::bail!("{}: no frames to make a movie of", frames.display());
+    };
+    let (w, h, _) = read_png_rgb(first)?;
+    let mut file = parallax_common::atomic::AtomicFile::create(&gif_path)?;
+    {
+        let mut enc = gif::Encoder::new(&mut file, w as u16, h as u16, &[])?;
+        enc.set_repeat(gif::Repeat::Infinite)?;
+        for p in &names {
+            let (fw, fh, rgb) = read_png_rgb(p)?;
+            if [fw, fh] != [w, h] {
+                continue;
+            }
+            let mut f = gif::Frame::from_rgb_speed(w as u16, h as u16, &rgb, 10);
+            f.delay = 3; // 1/100 s: about 30 frames per second
+            enc.write_frame(&f)?;
+        }
+    }
+    file.commit()?;
+    Ok(gif_path)
+}
+
+fn read_png_rgb(p: &Path) -> Result<(u32, u32, Vec<u8>)> {
+    let f = std::fs::File::open(p).with_context(|| format!("{}: cannot read", p.display()))?;
+    let mut reader = png::Decoder::new(std::io::BufReader::new(f)).read_info()?;
+    let mut buf = vec![0u8; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf)?;
+    buf.truncate(info.buffer_size());
+    anyhow::ensure!(
+        info.color_type == png::ColorType::Rgb,
+        "{}: not an RGB frame",
+        p.display()
+    );
+    Ok((info.width, info.height, buf))
+}

@@ -1,0 +1,431 @@
+//! The live session's shared state and the client messages that change it,
+//! each checked before anything changes (docs/live-protocol.md).
+
+use super::EyeView;
+use anyhow::{bail, ensure, Context, Result};
+use glam::{DMat3, DQuat, DVec3, EulerRot};
+use parallax_common::camera::Placement;
+use parallax_common::config::{Display, Scene};
+use parallax_common::protocol::StreamImage;
+use parallax_common::tf::TransferFunction;
+use parallax_common::tools::Tool;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Everything a client can change; what a copied link carries.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LiveState {
+    pub placement: Placement,
+    pub eta: f64,
+    pub accuracy: f64,
+    pub step_factor: f64,
+    pub gamma: f64,
+    pub tf: TransferFunction,
+    #[serde(with = "parallax_common::tools::list")]
+    pub tools: Vec<Tool>,
+    /// "desktop", a projector id, or "eye".
+    pub output: String,
+    pub eye_x: f64,
+    #[serde(default)]
+    pub recording: bool,
+}
+
+/// A transfer function point as the page sends it.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointMsg {
+    value: f64,
+    color: [f64; 3],
+    extinction: f64,
+    importance: Option<f64>,
+    refraction: Option<f64>,
+}
+
+/// A client's message (docs/live-protocol.md).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ClientMsg {
+    Rotate {
+        dx: f64,
+        dy: f64,
+    },
+    Zoom {
+        factor: f64,
+    },
+    Pan {
+        dx: f64,
+        dy: f64,
+    },
+    Set {
+        eta: Option<f64>,
+        accuracy: Option<f64>,
+        step_factor: Option<f64>,
+        gamma: Option<f64>,
+    },
+    Tf {
+        point: Vec<PointMsg>,
+    },
+    Tool {
+        index: usize,
+        point: Option<[f64; 3]>,
+        normal: Option<[f64; 3]>,
+        thickness: Option<f64>,
+        context: Option<[f64; 2]>,
+    },
+    Output {
+        output: String,
+        eye_x: Option<f64>,
+    },
+    Focus {
+        x: f64,
+        y: f64,
+    },
+    Record {
+        on: bool,
+    },
+    State {
+        state: Box<LiveState>,
+    },
+    Quit,
+}
+
+/// `v` if it is finite and within [lo, hi]; otherwise an error naming it.
+fn within(name: &str, v: f64, lo: f64, hi: f64) -> Result<f64> {
+    ensure!(
+        v.is_finite() && (lo..=hi).contains(&v),
+        "{name}: {v} is outside [{lo}, {hi}]"
+    );
+    Ok(v)
+}
+
+fn within3(name: &str, v: [f64; 3], lo: f64, hi: f64) -> Result<[f64; 3]> {
+    for c in v {
+        within(name, c, lo, hi)?;
+    }
+    Ok(v)
+}
+
+/// The outputs a display offers: the desktop window, or each projector and
+/// the simulated eye view of a light field display.
+pub fn outputs(display: &Display) -> Vec<String> {
+    if display.projectors.len() == 1 {
+        vec!["desktop".into()]
+    } else {
+        let mut v: Vec<String> = display.projectors.iter().map(|p| p.id.clone()).collect();
+        v.push("eye".into());
+        v
+    }
+}
+
+/// The page's first message.
+pub fn hello(
+    scene_path: &Path,
+    scene: &Scene,
+    display: &Display,
+    record_dir: &Path,
+) -> serde_json::Value {
+    let tf = TransferFunction::load(&scene.transfer_function).ok();
+    let range = tf.map_or([0.0, 1.0], |tf| {
+        let p = tf.points();
+        [p[0].value, p[p.len() - 1].value]
+    });
+    let w = display.screen.size[0];
+    serde_json::json!({
+        "type": "hello",
+        "scene": scene_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+        "outputs": outputs(display),
+        "value_range": range,
+        "tool_kinds": scene.tools.iter().map(|t| t.enhancer().file()).collect::<Vec<_>>(),
+        "eye_range": [-w, w],
+        "record_dir": record_dir.display().to_string(),
+    })
+}
+
+impl LiveState {
+    pub fn from_scene(scene: &Scene, display: &Display, tf: TransferFunction) -> Self {
+        LiveState {
+            placement: scene.placement,
+            eta: scene.render.eta,
+            accuracy: scene.render.accuracy,
+            step_factor: scene.render.step_factor,
+            gamma: scene.render.gamma,
+            tf,
+            tools: scene.tools.clone(),
+            output: if display.projectors.len() == 1 {
+                "desktop".into()
+            } else {
+                "eye".into()
+            },
+            eye_x: display.observer.position[0],
+            recording: false,
+        }
+    }
+
+    /// Applies a state-changing message (not focus or quit); on error the
+    /// state may be half changed, so the caller applies it to a copy.
+    pub fn apply(&mut self, msg: ClientMsg, display: &Display) -> Result<()> {
+        match msg {
+            ClientMsg::Rotate { dx, dy } => {
+                let dx = within("rotate.dx", dx, -360.0, 360.0)?;
+                let dy = within("rotate.dy", dy, -360.0, 360.0)?;
+                let turn = DMat3::from_rotation_y(dx.to_radians())
+                    * DMat3::from_rotation_x(dy.to_radians());
+                self.placement.rotation_deg = euler_deg(turn * self.placement.rotation());
+            }
+            ClientMsg::Zoom { factor } => {
+                let f = within("zoom.factor", factor, 0.1, 10.0)?;
+                self.placement.size =
+                    within("placement.size", self.placement.size * f, 1e-4, 100.0)
+                        .context("zoom: the volume would be too small or too large")?;
+            }
+            ClientMsg::Pan { dx, dy } => {
+                let dx = within("pan.dx", dx, -10.0, 10.0)?;
+                let dy = within("pan.dy", dy, -10.0, 10.0)?;
+                self.placement.center[0] += dx;
+                self.placement.center[1] += dy;
+            }
+            ClientMsg::Set {
+                eta,
+                accuracy,
+                step_factor,
+                gamma,
+            } => {
+                if let Some(v) = eta {
+                    self.eta = within("set.eta", v, 0.0, 1.0)?;
+                }
+                if let Some(v) = accuracy {
+                    self.accuracy = within("set.accuracy", v, 0.05, 64.0)?;
+                }
+                if let Some(v) = step_factor {
+                    self.step_factor = within("set.step_factor", v, 0.01, 8.0)?;
+                }
+                if let Some(v) = gamma {
+                    self.gamma = within("set.gamma", v, 0.0, 1.0)?;
+                }
+            }
+            ClientMsg::Tf { point } => {
+                ensure!(
+                    (2..=256).contains(&point.len()),
+                    "tf.point: {} points (2 to 256)",
+                    point.len()
+                );
+                let pts = point
+                    .into_iter()
+                    .map(|p| {
+                        let mut c =
+                            parallax_common::tf::ControlPoint::new(p.value, p.color, p.extinction);
+                        if let Some(i) = p.importance {
+                            c.importance = i;
+                        }
+                        if let Some(r) = p.refraction {
+                            c.refraction = r;
+                        }
+                        c
+                    })
+                    .collect();
+                self.tf = TransferFunction::from_points(pts).context("tf")?;
+            }
+            ClientMsg::Tool {
+                index,
+                point,
+                normal,
+                thickness,
+                context,
+            } => {
+                let n = self.tools.len();
+                let tool = self
+                    .tools
+                    .get_mut(index)
+                    .with_context(|| format!("tool.index: {index}, the scene has {n} tool(s)"))?;
+                let Tool::ClipPlane(c) = tool else {
+                    bail!("tool {index}: this kind of tool has no pose");
+                };
+                if let Some(p) = point {
+                    c.point = within3("tool.point", p, -10.0, 10.0)?;
+                }
+                if let Some(v) = normal {
+                    c.normal = within3("tool.normal", v, -1e3, 1e3)?;
+                }
+                if let Some(t) = thickness {
+                    c.thickness = within("tool.thickness", t, 0.0, 10.0)?;
+                }
+                if let Some(x) = context {
+                    c.context = [
+                        within("tool.context", x[0], -10.0, 10.0)?,
+                        within("tool.context", x[1], -10.0, 10.0)?,
+                    ];
+                }
+                tool.check(&format!("tool {index}"))?;
+            }
+            ClientMsg::Output { output, eye_x } => {
+                ensure!(
+                    outputs(display).contains(&output),
+                    "output: '{output}' is not one of {:?}",
+                    outputs(display)
+                );
+                self.output = output;
+                if let Some(x) = eye_x {
+                    self.eye_x = within("output.eye_x", x, -10.0, 10.0)?;
+                }
+            }
+            ClientMsg::Record { on } => self.recording = on,
+            ClientMsg::State { state } => {
+                let s = *state;
+                // Every field through the same checks as its own message.
+                let mut next = self.clone();
+                next.placement = s.placement;
+                within3("state.placement.center", s.placement.center, -10.0, 10.0)?;
+                within3(
+                    "state.placement.rotation_deg",
+                    s.placement.rotation_deg,
+                    -1e4,
+                    1e4,
+                )?;
+                within("state.placement.size", s.placement.size, 1e-4, 100.0)?;
+                next.apply(
+                    ClientMsg::Set {
+                        eta: Some(s.eta),
+                        accuracy: Some(s.accuracy),
+                        step_factor: Some(s.step_factor),
+                        gamma: Some(s.gamma),
+                    },
+                    display,
+                )?;
+                next.tf = s.tf;
+                ensure!(
+                    s.tools.len() == self.tools.len()
+                        && s.tools
+                            .iter()
+                            .zip(&self.tools)
+                            .all(|(a, b)| a.enhancer() == b.enhancer()),
+                    "state.tools: not this scene's tools"
+                );
+                for (i, t) in s.tools.iter().enumerate() {
+                    t.check(&format!("state.tools {i}"))?;
+                }
+                next.tools = s.tools;
+                next.apply(
+                    ClientMsg::Output {
+                        output: s.output,
+                        eye_x: Some(s.eye_x),
+                    },
+                    display,
+                )?;
+                *self = next;
+            }
+            ClientMsg::Focus { .. } | ClientMsg::Quit => {
+                bail!("not a state change")
+            }
+        }
+        Ok(())
+    }
+
+    /// The eye of the streamed output: the observer, or the moved eye of
+    /// the eye view.
+    fn eye(&self, display: &Display) -> [f64; 3] {
+        let o = display.observer.position;
+        if self.output == "eye" {
+            [self.eye_x, o[1], o[2]]
+        } else {
+            o
+        }
+    }
+
+    /// The projectors whose images this state's output needs.
+    pub fn streamed(&self, display: &Display) -> Vec<u32> {
+        match self.projector(display) {
+            Some(i) => vec![i as u32],
+            None => (0..display.projectors.len() as u32).collect(),
+        }
+    }
+
+    fn projector(&self, display: &Display) -> Option<usize> {
+        if self.output == "desktop" {
+            return Some(0);
+        }
+        display.projectors.iter().position(|p| p.id == self.output)
+    }
+
+    /// The streamed output of one frame: width, height, sRGB RGB.
+    pub fn image(
+        &self,
+        display: &Display,
+        images: &[StreamImage],
+        eye_view: EyeView,
+    ) -> Result<(u32, u32, Vec<u8>)> {
+        match self.projector(display) {
+            Some(i) => {
+                let im = images
+                    .iter()
+                    .find(|im| im.projector as usize == i)
+                    .context("the streamed projector's image did not arrive")?;
+                Ok((im.width, im.height, im.rgb8.clone()))
+            }
+            None => eye_view(display, images, self.eye(display)),
+        }
+    }
+
+    /// The display-space ray through the point (x, y) ∈ [0, 1]² (0, 0 at the
+    /// top left) of the streamed image: from the output's eye through that
+    /// point of its screen region.
+    pub fn focus_ray(&self, display: &Display, x: f64, y: f64) -> Result<[[f64; 3]; 2]> {
+        let x = within("x", x, 0.0, 1.0)?;
+        let y = within("y", y, 0.0, 1.0)?;
+        let [sw, sh] = display.screen.size;
+        let region = match self.projector(display) {
+            Some(i) => display.views(self.eta)[i].region,
+            None => [-sw / 2.0, -sh / 2.0, sw, sh],
+        };
+        let q = DVec3::new(
+            region[0] + x * region[2],
+            region[1] + (1.0 - y) * region[3],
+            0.0,
+        );
+        let eye = DVec3::from(self.eye(display));
+        let d = q - eye;
+        ensure!(d.length() > 1e-12, "the eye lies on the screen");
+        Ok([eye.into(), d.normalize().into()])
+    }
+}
+
+/// Placement's x-then-y-then-z fixed-axis angles (degrees) of a rotation.
+fn euler_deg(r: DMat3) -> [f64; 3] {
+    let (z, y, x) = DQuat::from_mat3(&r).normalize().to_euler(EulerRot::ZYX);
+    [x.to_degrees(), y.to_degrees(), z.to_degrees()]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn euler_angles_round_trip_through_placement() {
+        let p = Placement {
+            center: [0.0; 3],
+            rotation_deg: [-90.0, 180.0, 0.0],
+            size: 1.0,
+        };
+        let back = euler_deg(p.rotation());
+        let q = Placement {
+            rotation_deg: back,
+            ..p
+        };
+        let d = (q.rotation() - p.rotation()).to_cols_array();
+        assert!(d.iter().all(|v| v.abs() < 1e-12), "{back:?}");
+    }
+
+    #[test]
+    fn a_drag_turns_about_the_screen_axes() {
+        let mut p = Placement {
+            center: [0.0; 3],
+            rotation_deg: [10.0, 20.0, 30.0],
+            size: 1.0,
+        };
+        let before = p.rotation();
+        p.rotation_deg = euler_deg(DMat3::from_rotation_y(15f64.to_radians()) * before);
+        let expect = DMat3::from_rotation_y(15f64.to_radians()) * before;
+        let d = (p.rotation() - expect).to_cols_array();
+        assert!(d.iter().all(|v| v.abs() < 1e-12));
+    }
+}

@@ -1,0 +1,1015 @@
+//! The live coordinator (`parallax serve`) driven as a client would drive
+//! it: over its WebSocket, in-process (embedded back ends) and as the real
+//! binary under `mpirun -n 3`; and its page in a real browser.
+
+mod support;
+
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+use tokio_tungstenite::tungstenite::Message;
+
+type Ws =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_parallax")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn run(args: &[&str]) {
+    let o = Command::new(bin()).args(args).output().unwrap();
+    assert!(
+        o.status.success(),
+        "parallax {args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// A small volume, a transfer function, a desktop display (one window)
+/// and an 8-projector wall, and a scene for each (the desktop one with a
+/// clip plane far away, to move).
+struct World {
+    dir: tempfile::TempDir,
+}
+
+impl World {
+    fn new(desktop: [u32; 2]) -> World {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        run(&[
+            "synth",
+            "shepp-logan",
+            "--size",
+            "48",
+            "-o",
+            s(&d.join("v.nrrd")),
+        ]);
+        run(&[
+            "import",
+            s(&d.join("v.nrrd")),
+            "-o",
+            s(&d.join("v.pxo")),
+            "--brick",
+            "16",
+        ]);
+        std::fs::write(
+            d.join("tf.toml"),
+            "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 100\ncolor = [0.2, 0.5, 1]\nextinction = 0.05\n[[point]]\nvalue = 255\ncolor = [1, 0.8, 0.4]\nextinction = 0.4\n",
+        )
+        .unwrap();
+        std::fs::create_dir_all(d.join("desktop")).unwrap();
+        std::fs::write(
+            d.join("desktop.toml"),
+            "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.004\nangular_accuracy_deg = 0.0\n[observer]\nposition = [0.0, 0.0, 0.8]\nprojectors = \"desktop/\"\n",
+        )
+        .unwrap();
+        std::fs::write(
+            d.join("desktop/window.toml"),
+            format!(
+                "id = \"window\"\nposition = [0.0, 0.0, 0.8]\nresolution = [{}, {}]\n",
+                desktop[0], desktop[1]
+            ),
+        )
+        .unwrap();
+        run(&[
+            "display-gen",
+            "--projectors",
+            "8",
+            "--resolution",
+            "48x27",
+            "--pixel-size",
+            "0.0333",
+            "-o",
+            s(&d.join("wall")),
+        ]);
+        let body = "volume = \"v.pxo\"\ntransfer_function = \"tf.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.25\nrotation_deg = [15, 30, 0]\n";
+        std::fs::write(
+            d.join("desktop-scene.toml"),
+            format!("display = \"desktop.toml\"\n{body}[render]\neta = 0.0\nshading = \"phong\"\n[[tool]]\nkind = \"clip-plane\"\npoint = [0, 0, 5]\nnormal = [0, 0, 1]\n"),
+        )
+        .unwrap();
+        std::fs::write(
+            d.join("wall-scene.toml"),
+            format!(
+                "display = \"wall/display.toml\"\n{}[render]\neta = 1.0\nshading = \"phong\"\n",
+                body.replace("size = 0.25", "size = 0.8")
+            ),
+        )
+        .unwrap();
+        World { dir }
+    }
+
+    fn path(&self, p: &str) -> PathBuf {
+        self.dir.path().join(p)
+    }
+}
+
+/// A client of the live server.
+struct Client {
+    ws: Ws,
+    /// The newest state message's `state` and `version`.
+    state: Value,
+    version: u64,
+}
+
+/// One frame as the client received it.
+struct Frame {
+    header: Value,
+    png: Vec<u8>,
+}
+
+impl Frame {
+    fn version(&self) -> u64 {
+        self.header["version"].as_u64().unwrap()
+    }
+    fn converged(&self) -> bool {
+        self.header["converged"].as_bool().unwrap()
+    }
+    fn pixels(&self) -> Vec<u8> {
+        let mut r = png::Decoder::new(std::io::Cursor::new(&self.png))
+            .read_info()
+            .unwrap();
+        let mut buf = vec![0u8; r.output_buffer_size()];
+        let info = r.next_frame(&mut buf).unwrap();
+        buf.truncate(info.buffer_size());
+        buf
+    }
+}
+
+/// Mean absolute difference of two images' bytes (0–255).
+fn diff(a: &[u8], b: &[u8]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (*x as f64 - *y as f64).abs())
+        .sum::<f64>()
+        / a.len() as f64
+}
+
+const WAIT: Duration = Duration::from_secs(120);
+
+impl Client {
+    async fn connect(url: &str) -> Client {
+        let ws_url = url
+            .replace("http://", "ws://")
+            .replace("/?token=", "/ws?token=");
+        let (ws, _) = tokio_tungstenite::connect_async(ws_url).await.unwrap();
+        let mut c = Client {
+            ws,
+            state: Value::Null,
+            version: 0,
+        };
+        let hello = c.next_text().await;
+        assert_eq!(hello["type"], "hello", "{hello}");
+        while c.version == 0 {
+            c.next_text().await;
+        }
+        c
+    }
+
+    async fn send(&mut self, v: Value) {
+        self.send_raw(&v.to_string()).await;
+    }
+
+    async fn send_raw(&mut self, text: &str) {
+        self.ws.send(Message::Text(text.into())).await.unwrap();
+    }
+
+    /// The next text message (state messages are also kept).
+    async fn next_text(&mut self) -> Value {
+        loop {
+            let m = tokio::time::timeout(WAIT, self.ws.next())
+                .await
+                .expect("the server went quiet")
+                .expect("the server closed the socket")
+                .unwrap();
+            if let Message::Text(t) = m {
+                let v: Value = serde_json::from_str(t.as_str()).unwrap();
+                if v["type"] == "state" {
+                    self.version = v["version"].as_u64().unwrap();
+                    self.state = v["state"].clone();
+                }
+                return v;
+            }
+        }
+    }
+
+    /// The next frame (skipping other messages).
+    async fn next_frame(&mut self) -> Frame {
+        loop {
+            let v = self.next_text().await;
+            if v["type"] == "frame" {
+                let m = tokio::time::timeout(WAIT, self.ws.next())
+                    .await
+                    .unwrap()
+                    .unwrap()
+                    .unwrap();
+                let Message::Binary(png) = m else {
+                    panic!("a frame header without its image: {m:?}")
+                };
+                return Frame {
+                    header: v,
+                    png: png.to_vec(),
+                };
+            }
+            assert_ne!(v["type"], "error", "{v}");
+        }
+    }
+
+    /// The first converged frame rendered from state `version` or later.
+    async fn settled(&mut self, version: u64) -> Frame {
+        loop {
+            let f = self.next_frame().await;
+            if f.version() >= version && f.converged() {
+                return f;
+            }
+        }
+    }
+
+    /// The next message of type `kind` (skipping frames and the rest).
+    async fn wait_for(&mut self, kind: &str) -> Value {
+        loop {
+            let v = self.next_text().await;
+            if v["type"] == kind {
+                return v;
+            }
+            if v["type"] == "frame" {
+                self.ws.next().await;
+            }
+        }
+    }
+
+    /// The next error message.
+    async fn error(&mut self) -> String {
+        let v = self.wait_for("error").await;
+        v["message"].as_str().unwrap().to_string()
+    }
+
+    /// Sends a change and returns the version it produced.
+    async fn change(&mut self, v: Value) -> u64 {
+        let before = self.version;
+        self.send(v).await;
+        while self.version == before {
+            let m = self.next_text().await;
+            assert_ne!(m["type"], "error", "{m}");
+            if m["type"] == "frame" {
+                self.ws.next().await;
+            }
+        }
+        self.version
+    }
+}
+
+/// Starts `parallax serve` in this process (embedded back ends) on a free
+/// port; returns its URL and the thread.
+fn serve_in_process(
+    scene: PathBuf,
+    extra: impl FnOnce(&mut parallax_frontend::live::ServeOptions),
+) -> (String, std::thread::JoinHandle<anyhow::Result<()>>) {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let mut opts = parallax_frontend::live::ServeOptions {
+        scene: scene.clone(),
+        display: None,
+        bind: "127.0.0.1:0".parse().unwrap(),
+        token: None,
+        out: None,
+        sync_io: false,
+        record: None,
+        record_dir: scene.parent().unwrap().join("recordings"),
+        watchdog: Some(Duration::from_secs(120)),
+        ready: Some(tx),
+        eye_view: parallax::launch::eye_view,
+    };
+    extra(&mut opts);
+    let t = std::thread::spawn(move || {
+        parallax::launch::embedded(1, |t| parallax_frontend::live::serve(opts, t))
+    });
+    let url = rx.recv_timeout(WAIT).expect("the server did not start");
+    (url, t)
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
+#[test]
+fn a_websocket_client_drives_the_desktop_view() {
+    std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    let w = World::new([96, 72]);
+    let (url, server) = serve_in_process(w.path("desktop-scene.toml"), |_| {});
+    runtime().block_on(async {
+        let mut a = Client::connect(&url).await;
+        let first = a.settled(1).await;
+        assert_eq!(first.header["width"], 96);
+        let img0 = first.pixels();
+        assert!(
+            img0.iter().filter(|&&v| v > 20).count() > img0.len() / 20,
+            "the volume is visible"
+        );
+
+        // Rotate: a new frame arrives and differs.
+        let v = a.change(json!({"type": "rotate", "dx": 40.0, "dy": 0.0})).await;
+        let img1 = a.settled(v).await.pixels();
+        let d = diff(&img0, &img1);
+        assert!(d > 2.0, "rotating changed the image by {d}");
+
+        // A transfer function edit changes the image.
+        let v = a
+            .change(json!({"type": "tf", "point": [
+                {"value": 0, "color": [0, 0, 0], "extinction": 0},
+                {"value": 100, "color": [1, 0, 0], "extinction": 0.05},
+                {"value": 255, "color": [1, 0, 0], "extinction": 0.4}]}))
+            .await;
+        let img2 = a.settled(v).await.pixels();
+        let red: f64 = img2.chunks(3).map(|p| p[0] as f64 - p[2] as f64).sum();
+        assert!(diff(&img1, &img2) > 2.0 && red > 0.0, "the edit turned it red");
+
+        // Malformed, unknown, NaN and out-of-range messages are refused
+        // with a message, and nothing changes.
+        let version = a.version;
+        for (bad, says) in [
+            (r#"{"type": "rotate", "dx": "#, "refused"),
+            (r#"{"type": "zoom", "factor": 2, "extra": 1}"#, "unknown field"),
+            (r#"{"type": "teleport"}"#, "unknown variant"),
+            (r#"{"type": "zoom", "factor": NaN}"#, "refused"),
+            (r#"{"type": "set", "eta": 2.0}"#, "eta"),
+            (r#"{"type": "set", "accuracy": 1e999}"#, "refused"),
+            (r#"{"type": "zoom", "factor": 0}"#, "factor"),
+            (r#"{"type": "tool", "index": 3, "point": [0, 0, 0]}"#, "index"),
+            (r#"{"type": "tool", "index": 0, "normal": [0, 0, 0]}"#, "normal"),
+            (r#"{"type": "output", "output": "../../etc"}"#, "output"),
+            (r#"{"type": "tf", "point": [{"value": 1, "color": [0, 0, 0], "extinction": -1}, {"value": 2, "color": [0, 0, 0], "extinction": 0}]}"#, "extinction"),
+            (r#"{"type": "focus", "x": 2, "y": 0.5}"#, "x"),
+        ] {
+            a.send_raw(bad).await;
+            let e = a.error().await;
+            assert!(e.contains(says), "{bad} → {e}");
+        }
+        assert_eq!(a.version, version, "a refused message changed nothing");
+
+        // The server keeps serving, and a second client sees the same
+        // state, and the first client's changes.
+        let v = a.change(json!({"type": "zoom", "factor": 1.1})).await;
+        a.settled(v).await;
+        let mut b = Client::connect(&url).await;
+        assert_eq!(b.state, a.state);
+        assert_eq!(b.version, a.version);
+        let v = a.change(json!({"type": "pan", "dx": 0.01, "dy": 0.0})).await;
+        while b.version < v {
+            b.next_text().await;
+        }
+        assert_eq!(b.state, a.state);
+        // … and a change from the second reaches the first.
+        let v = b.change(json!({"type": "tool", "index": 0, "point": [0, 0, 4]})).await;
+        while a.version < v {
+            a.next_text().await;
+        }
+        assert_eq!(a.state["tools"][0]["point"], json!([0.0, 0.0, 4.0]));
+
+        // Focus: a click on the volume moves it along z so that the
+        // clicked point lies on the screen plane; a click on empty space
+        // is refused.
+        let z0 = a.state["placement"]["center"][2].as_f64().unwrap();
+        let v = a.change(json!({"type": "focus", "x": 0.5, "y": 0.5})).await;
+        let z1 = a.state["placement"]["center"][2].as_f64().unwrap();
+        assert!((z1 - z0).abs() > 1e-3, "focus moved the volume: {z0} → {z1}");
+        a.settled(v).await;
+        a.send(json!({"type": "focus", "x": 0.01, "y": 0.01})).await;
+        let e = a.error().await;
+        assert!(e.contains("nothing visible"), "{e}");
+
+        // Record: a script and a movie.
+        let v = a.change(json!({"type": "record", "on": true})).await;
+        a.settled(v).await;
+        let v = a.change(json!({"type": "rotate", "dx": 10.0, "dy": 5.0})).await;
+        a.settled(v).await;
+        a.send(json!({"type": "record", "on": false})).await;
+        let rec = a.wait_for("recorded").await;
+        let script = PathBuf::from(rec["script"].as_str().unwrap());
+        let movie = PathBuf::from(rec["movie"].as_str().unwrap());
+        assert!(rec["frames"].as_u64().unwrap() >= 2, "{rec}");
+        parallax_frontend::script::Script::load(&script).unwrap();
+        assert!(std::fs::metadata(&movie).unwrap().len() > 100, "{}", movie.display());
+
+        // A copied link's state is applied whole.
+        let mut linked = a.state.clone();
+        linked["eta"] = json!(0.25);
+        linked["placement"]["size"] = json!(0.3);
+        let v = a.change(json!({"type": "state", "state": linked})).await;
+        assert_eq!(a.state, linked);
+        a.settled(v).await;
+        linked["tools"] = json!([]);
+        a.send(json!({"type": "state", "state": linked})).await;
+        let e = a.error().await;
+        assert!(e.contains("tools"), "{e}");
+
+        // A wrong token is refused.
+        let bad = url.replace("token=", "token=x");
+        let bad = bad.replace("http://", "ws://").replace("/?", "/ws?");
+        assert!(tokio_tungstenite::connect_async(bad).await.is_err());
+
+        a.send(json!({"type": "quit"})).await;
+        a.wait_for("ended").await;
+    });
+    server.join().unwrap().unwrap();
+}
+
+/// A child process that is killed if the test ends early.
+struct Killed(Option<Child>);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        if let Some(c) = self.0.as_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// `mpirun -n 3 parallax serve …`: waits for the URL it prints.
+fn serve_mpi(args: &[&str]) -> (Killed, String) {
+    let (child, url, _) = spawn_serve(args, &[], false);
+    (child, url)
+}
+
+/// `mpirun -n 3 parallax serve …` with `env`; its URL, and its standard
+/// error when `capture` (else inherited).
+fn spawn_serve(
+    args: &[&str],
+    env: &[(&str, &str)],
+    capture: bool,
+) -> (Killed, String, Option<std::thread::JoinHandle<String>>) {
+    let mut child = Command::new("mpirun")
+        .args(["-n", "3", bin(), "serve", "--bind", "127.0.0.1:0"])
+        .args(args)
+        .envs(env.iter().copied())
+        .stdout(Stdio::piped())
+        .stderr(if capture {
+            Stdio::piped()
+        } else {
+            Stdio::inherit()
+        })
+        .spawn()
+        .unwrap();
+    let out = child.stdout.take().unwrap();
+    let stderr = child
+        .stderr
+        .take()
+        .map(|e| std::thread::spawn(move || std::io::read_to_string(e).unwrap()));
+    let child = Killed(Some(child));
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            println!("serve: {line}");
+            if let Some(i) = line.find("http://") {
+                let _ = tx.send(line[i..].trim().to_string());
+            }
+        }
+    });
+    let url = rx.recv_timeout(WAIT).expect("serve printed no URL");
+    (child, url, stderr)
+}
+
+fn wait_ok(mut k: Killed) {
+    let mut child = k.0.take().unwrap();
+    let start = Instant::now();
+    loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            assert!(st.success(), "serve exited with {st}");
+            return;
+        }
+        assert!(start.elapsed() < WAIT, "serve did not end");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn the_wall_under_mpirun_shows_the_eye_view_and_its_recording_replays_bit_for_bit() {
+    let w = World::new([64, 48]);
+    let scene = w.path("wall-scene.toml");
+    let out = w.path("live-out");
+    let rec = w.path("rec");
+    let (child, url) = serve_mpi(&[
+        "--scene",
+        s(&scene),
+        "--sync",
+        "--out",
+        s(&out),
+        "--record",
+        s(&rec),
+    ]);
+    runtime().block_on(async {
+        let mut c = Client::connect(&url).await;
+        assert_eq!(c.state["output"], "eye");
+        let f0 = c.settled(1).await;
+        let img0 = f0.pixels();
+        assert_eq!(
+            f0.header["stats"].as_array().unwrap().len(),
+            2,
+            "two back ends"
+        );
+        // The eye moves: the simulated view changes.
+        let v = c
+            .change(json!({"type": "output", "output": "eye", "eye_x": 0.4}))
+            .await;
+        let img1 = c.settled(v).await.pixels();
+        let lit = |im: &[u8]| im.iter().filter(|&&v| v > 20).count() as f64 / im.len() as f64;
+        println!(
+            "eye view {}×{}: {:.0}% lit; moving the eye 0.4 m changed it by {:.2}",
+            f0.header["width"],
+            f0.header["height"],
+            100.0 * lit(&img0),
+            diff(&img0, &img1)
+        );
+        assert!(lit(&img0) > 0.02, "the eye sees the volume");
+        assert!(diff(&img0, &img1) > 0.5, "moving the eye changed the view");
+        // Input: the eye view updates.
+        let v = c
+            .change(json!({"type": "rotate", "dx": 25.0, "dy": -10.0}))
+            .await;
+        let img2 = c.settled(v).await.pixels();
+        assert!(diff(&img1, &img2) > 1.0, "rotating changed the view");
+        let v = c
+            .change(json!({"type": "set", "eta": 0.5, "accuracy": 0.5}))
+            .await;
+        c.settled(v).await;
+        // A projector's own image.
+        let v = c.change(json!({"type": "output", "output": "p03"})).await;
+        let f = c.settled(v).await;
+        assert_eq!(
+            (f.header["width"].clone(), f.header["height"].clone()),
+            (json!(48), json!(27))
+        );
+        c.send(json!({"type": "quit"})).await;
+    });
+    wait_ok(child);
+
+    // Replay the recording: the same images, bit for bit.
+    let replay = w.path("replay-out");
+    let o = Command::new("mpirun")
+        .args([
+            "-n",
+            "3",
+            bin(),
+            "render",
+            "--scene",
+            s(&scene),
+            "--sync",
+            "--out",
+            s(&replay),
+            "--script",
+        ])
+        .arg(rec.join("script.toml"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let frames: Vec<PathBuf> = {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.is_dir())
+            .collect();
+        v.sort();
+        v
+    };
+    assert!(frames.len() >= 5, "{} frames", frames.len());
+    let mut compared = 0;
+    for f in &frames {
+        for p in 0..8 {
+            let name = format!("p{p:02}.png");
+            let live = std::fs::read(f.join(&name)).unwrap();
+            let again = std::fs::read(replay.join(f.file_name().unwrap()).join(&name))
+                .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            assert!(
+                live == again,
+                "{}/{name} differs in the replay",
+                f.display()
+            );
+            compared += 1;
+        }
+    }
+    println!(
+        "{} frames ({compared} projector images) replayed bit for bit",
+        frames.len()
+    );
+}
+
+#[test]
+fn a_soak_of_2000_frames_under_mpirun_keeps_memory_flat_and_loses_no_frame() {
+    let w = World::new([48, 36]);
+    let scene = w.path("wall-scene.toml");
+    let (child, url) = serve_mpi(&["--scene", s(&scene)]);
+    runtime().block_on(async {
+        let mut c = Client::connect(&url).await;
+        c.settled(1).await;
+        // A client that never reads: its frames pile up, then it is
+        // dropped; the loop never waits for it.
+        let _stalled = Client::connect(&url).await;
+        let mut rss: Vec<Vec<u64>> = Vec::new();
+        let mut last_frame = 0u64;
+        let mut latency = Vec::new();
+        let n = 2000;
+        let mut frames = 0usize;
+        for i in 0..n {
+            let t = Instant::now();
+            let want = c.change(json!({"type": "rotate", "dx": 1.0, "dy": if i % 2 == 0 { 0.5 } else { -0.5 }})).await;
+            // Every input is answered by a frame rendered from it, from
+            // both back ends.
+            let f = loop {
+                let f = c.next_frame().await;
+                let fr = f.header["frame"].as_u64().unwrap();
+                assert!(fr > last_frame || last_frame == 0, "frames in order");
+                last_frame = fr;
+                frames += 1;
+                if f.version() >= want {
+                    break f;
+                }
+            };
+            latency.push(t.elapsed().as_secs_f64() * 1e3);
+            let stats = f.header["stats"].as_array().unwrap();
+            assert_eq!(stats.len(), 2, "a reply from every back end");
+            if i % 100 == 99 {
+                let mut row: Vec<u64> = stats.iter().map(|s| s["rss_bytes"].as_u64().unwrap()).collect();
+                row.push(f.header["coordinator_rss_bytes"].as_u64().unwrap());
+                rss.push(row);
+            }
+        }
+        c.send(json!({"type": "quit"})).await;
+        latency.sort_by(f64::total_cmp);
+        println!(
+            "soak: {n} inputs, {frames} frames received, input → frame median {:.1} ms, p95 {:.1} ms",
+            latency[n / 2],
+            latency[n * 95 / 100]
+        );
+        println!("resident memory (MiB) every 100 inputs, [rank 1, rank 2, rank 0]:");
+        for r in &rss {
+            println!("  {:?}", r.iter().map(|b| b / (1 << 20)).collect::<Vec<_>>());
+        }
+        // Flat after warm-up: from input 500 on, no rank grows by more than
+        // 16 MiB.
+        let warm = &rss[4];
+        let end = rss.last().unwrap();
+        for k in 0..warm.len() {
+            let growth = end[k] as f64 - warm[k] as f64;
+            assert!(
+                growth < 16.0 * (1 << 20) as f64,
+                "rank column {k}: resident memory grew by {:.1} MiB after warm-up",
+                growth / (1 << 20) as f64
+            );
+        }
+    });
+    wait_ok(child);
+}
+
+/// The DevTools protocol over a WebSocket: one command, its result.
+struct Cdp {
+    ws: Ws,
+    next_id: u64,
+    session: Option<String>,
+}
+
+impl Cdp {
+    async fn call(&mut self, method: &str, params: Value) -> Value {
+        self.next_id += 1;
+        let id = self.next_id;
+        let mut msg = json!({"id": id, "method": method, "params": params});
+        if let Some(s) = &self.session {
+            msg["sessionId"] = json!(s);
+        }
+        self.ws
+            .send(Message::Text(msg.to_string().into()))
+            .await
+            .unwrap();
+        loop {
+            let m = tokio::time::timeout(WAIT, self.ws.next())
+                .await
+                .expect("chromium went quiet")
+                .unwrap()
+                .unwrap();
+            if let Message::Text(t) = m {
+                let v: Value = serde_json::from_str(t.as_str()).unwrap();
+                if v["id"] == json!(id) {
+                    assert!(v.get("error").is_none(), "{method}: {v}");
+                    return v["result"].clone();
+                }
+            }
+        }
+    }
+
+    async fn eval(&mut self, expr: &str) -> Value {
+        let r = self
+            .call(
+                "Runtime.evaluate",
+                json!({"expression": expr, "returnByValue": true}),
+            )
+            .await;
+        r["result"]["value"].clone()
+    }
+
+    async fn screenshot(&mut self) -> (u32, u32, Vec<u8>) {
+        use base64::Engine;
+        let r = self
+            .call("Page.captureScreenshot", json!({"format": "png"}))
+            .await;
+        let png = base64::engine::general_purpose::STANDARD
+            .decode(r["data"].as_str().unwrap())
+            .unwrap();
+        let mut d = png::Decoder::new(std::io::Cursor::new(&png));
+        d.set_transformations(png::Transformations::normalize_to_color8());
+        let mut r = d.read_info().unwrap();
+        let mut buf = vec![0u8; r.output_buffer_size()];
+        let info = r.next_frame(&mut buf).unwrap();
+        buf.truncate(info.buffer_size());
+        let ch = info.color_type.samples();
+        let rgb = buf.chunks(ch).flat_map(|p| [p[0], p[1], p[2]]).collect();
+        (info.width, info.height, rgb)
+    }
+}
+
+/// The pixels of `rect` (x, y, w, h in CSS pixels = screenshot pixels).
+fn crop(img: &(u32, u32, Vec<u8>), rect: [f64; 4]) -> Vec<u8> {
+    let (w, _, px) = img;
+    let mut out = Vec::new();
+    for y in rect[1] as usize..(rect[1] + rect[3]) as usize {
+        let row = y * *w as usize * 3;
+        out.extend_from_slice(
+            &px[row + rect[0] as usize * 3..row + (rect[0] + rect[2]) as usize * 3],
+        );
+    }
+    out
+}
+
+fn write_rgb_png(path: &Path, img: &(u32, u32, Vec<u8>)) {
+    let f = std::fs::File::create(path).unwrap();
+    let mut e = png::Encoder::new(f, img.0, img.1);
+    e.set_color(png::ColorType::Rgb);
+    e.set_depth(png::BitDepth::Eight);
+    e.write_header().unwrap().write_image_data(&img.2).unwrap();
+}
+
+/// Headless Chromium (Debian's; the test command installs it) loads the
+/// page, a drag through the DevTools protocol rotates the volume, and the
+/// screenshot shows it rotated. `PARALLAX_SCREENSHOT=FILE` keeps the
+/// screenshot (the README's).
+#[test]
+fn a_real_browser_drags_the_volume_round() {
+    std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    let chromium = Path::new("/usr/bin/chromium");
+    assert!(
+        chromium.exists(),
+        "{} is missing: the test command installs Debian's chromium",
+        chromium.display()
+    );
+    let w = World::new([320, 240]);
+    let (url, server) = serve_in_process(w.path("desktop-scene.toml"), |_| {});
+    let profile = w.path("chromium-profile");
+    let mut browser = Command::new(chromium)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--remote-debugging-port=0",
+            "--window-size=1280,800",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg("about:blank")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let err = browser.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines().map_while(Result::ok) {
+            if let Some(i) = line.find("ws://") {
+                let _ = tx.send(line[i..].trim().to_string());
+            }
+        }
+    });
+    let devtools = rx
+        .recv_timeout(WAIT)
+        .expect("chromium printed no DevTools address");
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        runtime().block_on(async {
+            let mut observer = Client::connect(&url).await;
+            let (ws, _) = tokio_tungstenite::connect_async(devtools.as_str()).await.unwrap();
+            let mut cdp = Cdp { ws, next_id: 0, session: None };
+            let target = cdp.call("Target.createTarget", json!({"url": url})).await;
+            let attached = cdp
+                .call(
+                    "Target.attachToTarget",
+                    json!({"targetId": target["targetId"], "flatten": true}),
+                )
+                .await;
+            cdp.session = Some(attached["sessionId"].as_str().unwrap().to_string());
+            cdp.call("Page.enable", json!({})).await;
+            // The page shows a frame once the cut has converged.
+            observer.settled(1).await;
+            let rect_js = "(() => { const v = document.getElementById('view'); if (!v || !v.naturalWidth) return ''; const r = v.getBoundingClientRect(); return JSON.stringify([r.x, r.y, r.width, r.height]); })()";
+            let start = Instant::now();
+            let rect: [f64; 4] = loop {
+                let r = cdp.eval(rect_js).await;
+                if let Some(s) = r.as_str().filter(|s| !s.is_empty()) {
+                    break serde_json::from_str(s).unwrap();
+                }
+                assert!(start.elapsed() < WAIT, "the page never showed a frame");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            };
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            let before = cdp.screenshot().await;
+            let rotation0 = observer.state["placement"]["rotation_deg"].clone();
+            // A drag across the image: press, move in steps, release.
+            let (cx, cy) = (rect[0] + rect[2] / 2.0, rect[1] + rect[3] / 2.0);
+            let mouse = |kind: &str, x: f64, buttons: u32| {
+                json!({"type": kind, "x": x, "y": cy, "button": "left", "buttons": buttons, "clickCount": 1})
+            };
+            cdp.call("Input.dispatchMouseEvent", mouse("mousePressed", cx, 1)).await;
+            for k in 1..=12 {
+                cdp.call("Input.dispatchMouseEvent", mouse("mouseMoved", cx + 12.0 * k as f64, 1))
+                    .await;
+                tokio::time::sleep(Duration::from_millis(30)).await;
+            }
+            cdp.call("Input.dispatchMouseEvent", mouse("mouseReleased", cx + 144.0, 0)).await;
+            // The server got the drag as rotations …
+            let start = Instant::now();
+            while observer.state["placement"]["rotation_deg"] == rotation0 {
+                assert!(start.elapsed() < WAIT, "the drag never reached the server");
+                let m = observer.next_text().await;
+                if m["type"] == "frame" {
+                    observer.ws.next().await;
+                }
+            }
+            // … wait for the last of them to settle, then look.
+            loop {
+                let f = observer.next_frame().await;
+                if f.converged() && f.version() == observer.version {
+                    break;
+                }
+            }
+            tokio::time::sleep(Duration::from_millis(800)).await;
+            let after = cdp.screenshot().await;
+            let (a, b) = (crop(&before, rect), crop(&after, rect));
+            let lit = b.iter().filter(|&&v| v > 40).count() as f64 / b.len() as f64;
+            let d = diff(&a, &b);
+            println!(
+                "browser: image at {rect:?}, {:.0}% lit, changed by {d:.1} per channel after the drag; rotation {} → {}",
+                100.0 * lit,
+                rotation0,
+                observer.state["placement"]["rotation_deg"]
+            );
+            let keep = std::env::var_os("PARALLAX_SCREENSHOT")
+                .map(PathBuf::from)
+                .unwrap_or_else(|| w.path("screenshot.png"));
+            write_rgb_png(&keep, &after);
+            assert!(lit > 0.05, "the volume is visible in the page ({lit})");
+            assert!(d > 2.0, "the page shows the volume rotated (change {d})");
+            cdp.session = None;
+            let _ = cdp.call("Browser.close", json!({})).await;
+            observer.send(json!({"type": "quit"})).await;
+        })
+    }));
+    let _ = browser.kill();
+    let _ = browser.wait();
+    if let Err(p) = result {
+        std::panic::resume_unwind(p);
+    }
+    server.join().unwrap().unwrap();
+}
+
+/// A back end that fails ends the live session as it ends `render`: the
+/// page is told which rank, and the process exits non-zero.
+#[test]
+fn a_failing_back_end_ends_the_live_session_naming_it() {
+    let w = World::new([48, 36]);
+    let scene = w.path("wall-scene.toml");
+    let (mut child, url, stderr) = spawn_serve(
+        &["--scene", s(&scene)],
+        &[("PARALLAX_FAULT", "panic:2:3")],
+        true,
+    );
+    let ended = runtime().block_on(async {
+        let mut c = Client::connect(&url).await;
+        let mut rotations = 0;
+        loop {
+            let m = c.next_text().await;
+            match m["type"].as_str() {
+                Some("ended") => return m["message"].as_str().unwrap().to_string(),
+                Some("frame") => {
+                    c.ws.next().await;
+                    if rotations < 8 {
+                        rotations += 1;
+                        c.send(json!({"type": "rotate", "dx": 5.0, "dy": 0.0}))
+                            .await;
+                    }
+                }
+                _ => {}
+            }
+        }
+    });
+    assert!(ended.contains("back end 2 failed"), "{ended}");
+    let status = child.0.as_mut().unwrap().wait().unwrap();
+    child.0 = None;
+    assert!(!status.success());
+    let e = stderr.unwrap().join().unwrap();
+    assert!(e.contains("back end 2 failed"), "{e}");
+}
+
+/// Input to new frame, as a client sees it (the PNG of the frame rendered
+/// from the input has arrived), for the desktop view (512×384) and the
+/// 8-projector wall (8 × 160×90, the eye view), embedded on this machine.
+/// A benchmark, not a test: `bash bench/live_latency.sh`.
+#[test]
+#[ignore]
+fn latency_of_input_to_frame() {
+    std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    let w = World::new([512, 384]);
+    run(&[
+        "display-gen",
+        "--projectors",
+        "8",
+        "--resolution",
+        "160x90",
+        "--pixel-size",
+        "0.01",
+        "-o",
+        s(&w.path("wall160")),
+    ]);
+    let wall = std::fs::read_to_string(w.path("wall-scene.toml"))
+        .unwrap()
+        .replace("wall/display.toml", "wall160/display.toml");
+    std::fs::write(w.path("wall160-scene.toml"), wall).unwrap();
+    let n: usize = std::env::var("PARALLAX_LATENCY_INPUTS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(200);
+    for (name, scene, backends) in [
+        ("desktop 512×384", "desktop-scene.toml", 1),
+        ("wall 8 × 160×90, eye view", "wall160-scene.toml", 2),
+    ] {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let opts = parallax_frontend::live::ServeOptions {
+            scene: w.path(scene),
+            display: None,
+            bind: "127.0.0.1:0".parse().unwrap(),
+            token: None,
+            out: None,
+            sync_io: false,
+            record: None,
+            record_dir: w.path("rec"),
+            watchdog: None,
+            ready: Some(tx),
+            eye_view: parallax::launch::eye_view,
+        };
+        let server = std::thread::spawn(move || {
+            parallax::launch::embedded(backends, |t| parallax_frontend::live::serve(opts, t))
+        });
+        let url = rx.recv_timeout(WAIT).unwrap();
+        let (lat, render) = runtime().block_on(async {
+            let mut c = Client::connect(&url).await;
+            c.settled(1).await;
+            let mut lat = Vec::new();
+            let mut render = Vec::new();
+            for i in 0..n {
+                let t = Instant::now();
+                let dy = if i % 2 == 0 { 0.5 } else { -0.5 };
+                let want = c
+                    .change(json!({"type": "rotate", "dx": 1.0, "dy": dy}))
+                    .await;
+                let f = loop {
+                    let f = c.next_frame().await;
+                    if f.version() >= want {
+                        break f;
+                    }
+                };
+                lat.push(t.elapsed().as_secs_f64() * 1e3);
+                render.push(f.header["wall_ms"].as_f64().unwrap());
+            }
+            c.send(json!({"type": "quit"})).await;
+            (lat, render)
+        });
+        server.join().unwrap().unwrap();
+        let med = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            (v[v.len() / 2], v[v.len() * 95 / 100])
+        };
+        let ((l50, l95), (r50, _)) = (med(lat), med(render));
+        println!(
+            "latency {name}: input → frame median {l50:.1} ms, p95 {l95:.1} ms ({n} inputs); of which the frame (broadcast to last reply) {r50:.1} ms"
+        );
+    }
+}
