@@ -27,6 +27,39 @@
 
 // Phong shading from central-difference gradients.
 override SHADING: bool = false;
+// Step over empty macrocells inside bricks (L12 §4.1; `cells`). Set only for
+// kernels where τ = 0 means no effect at all (plain DVR).
+override MACROCELLS: bool = false;
+// Count the samples taken (`counters`): benches and tests.
+override COUNT_SAMPLES: bool = false;
+
+// The macrocell of `leaf` the ray is in at `tc`: where the ray leaves it
+// (x), and, when the cell is empty, the largest k with t + k·h inside it and
+// before `t_end` (y; samples fall at t + k·h in a leaf), else 0.
+fn macrocell(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t: f32, h: f32,
+             tc: f32, t_end: f32) -> vec2<f32> {
+    let voxel = frame.spacing.xyz * f32(1u << (frame.counts.y - leaf.level));
+    let per_axis = frame.aux.z;
+    let m = f32(frame.aux.w);
+    let base = leaf.cell * f32(frame.counts.x);
+    let c = clamp(floor(((o + d * tc) / voxel - base) / m), vec3<f32>(0.0),
+                  vec3<f32>(f32(per_axis) - 1.0));
+    let lo = (base + c * m) * voxel;
+    let hi = lo + m * voxel;
+    let tx = select(select((lo - o) * inv_d, (hi - o) * inv_d, d > vec3<f32>(0.0)),
+                    vec3<f32>(3.0e38), abs(d) < vec3<f32>(1e-30));
+    let t_cell = min(min(tx.x, tx.y), tx.z);
+    let i = u32(c.x) + per_axis * (u32(c.y) + per_axis * u32(c.z));
+    if (((slots[leaf.slot].cells[i / 32u] >> (i % 32u)) & 1u) == 0u) {
+        return vec2<f32>(t_cell, 0.0);
+    }
+    let t_to = min(t_cell, t_end);
+    var k = floor((t_to - t) / h);
+    if (k >= 1.0 && t + k * h > t_to) {
+        k = k - 1.0;
+    }
+    return vec2<f32>(t_cell, max(k, 0.0));
+}
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -59,6 +92,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let origin = vec3<f32>((1.0 - eta) * v.x + eta * mcop_x, v.y, v.z);
     let dir_display = normalize(q - origin);
+    // sin(θ/2) of the angle θ the pixel subtends from the ray's origin (the
+    // larger of its width and height), for L12's adaptive step (Eq. 3).
+    let half_px = 0.5 * vec2<f32>(view.region.z / f32(view.size.x), view.region.w / f32(view.size.y));
+    let chord = max(length(normalize(q + vec3<f32>(half_px.x, 0.0, 0.0) - origin)
+                           - normalize(q - vec3<f32>(half_px.x, 0.0, 0.0) - origin)),
+                    length(normalize(q + vec3<f32>(0.0, half_px.y, 0.0) - origin)
+                           - normalize(q - vec3<f32>(0.0, half_px.y, 0.0) - origin)));
+    let sin_half = 0.5 * chord;
 
     // Display → volume space: p = Rᵀ(x − centre)/scale + N·s/2.
     let rt = mat3x3<f32>(frame.rt0.xyz, frame.rt1.xyz, frame.rt2.xyz);
@@ -115,6 +156,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var s_prev = 0.0;
     var have_prev = false;
     var nu_prev = -1.0;
+    var n_samples = 0u;
+    // Distance travelled before the last refraction bend (the adaptive
+    // step's t counts from the eye, not from the bend).
+    var t_base = 0.0;
     for (var visited = 0u; visited < MAX_NODES_PER_RAY; visited = visited + 1u) {
         let n = index[node];
         let level = n.data >> 24u;
@@ -148,20 +193,55 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // Sampling rate matched to the leaf's level.
             let voxel = frame.spacing.w * f32(1u << (frame.counts.y - level));
             var h = step_factor * voxel;
+            if (frame.render.w > 0.5) {
+                // L12 §4.4 Eq. 3: λ = t·sin(θ/2), the radius of the pixel's
+                // cone at distance t from the eye (data units, as the ray's
+                // parameter), taken at the leaf's entry so that the samples
+                // of a leaf stay evenly spaced; step_factor 0.5 is λ itself.
+                h = max(2.0 * step_factor * (t_base + t) * sin_half, voxel / 64.0);
+            }
             if (ISO && sparse) {
-                h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slot_range[slot].z));
+                h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slots[slot].range.z));
             }
             if (!have_prev) {
                 s_prev = sample_brick(leaf, o + d * t);
                 have_prev = true;
+                n_samples = n_samples + 1u;
             }
             var tc = t;
+            // Samples fall at t + k·h (and where the leaf ends or a tool's
+            // boundary lies): a skip over empty macrocells lands on them.
+            var k = 1u;
+            // Where the ray leaves the macrocell last looked up (it is
+            // looked up again only once the ray has left it).
+            var t_cell = -1.0;
             loop {
-                var tn = min(tc + h, t_exit);
+                if (MACROCELLS && tc >= t_cell) {
+                    // Every segment inside an empty cell adds exactly
+                    // nothing: go to its last sample there.
+                    let mc = macrocell(leaf, o, d, inv_d, t, h, tc, t_exit);
+                    t_cell = mc.x;
+                    if (mc.y >= f32(k)) {
+                        let kn = u32(mc.y);
+                        tc = t + f32(kn) * h;
+                        s_prev = sample_brick(leaf, o + d * tc);
+                        n_samples = n_samples + 1u;
+                        k = kn + 1u;
+                        if (tc >= t_exit) {
+                            break;
+                        }
+                    }
+                }
+                let tk = t + f32(k) * h;
+                var tn = min(tk, t_exit);
                 if (HAS_BREAKS) {
                     tn = min(tn, next_break(&ray, tc));
                 }
+                if (tn >= tk) {
+                    k = k + 1u;
+                }
                 let s = sample_brick(leaf, o + d * tn);
+                n_samples = n_samples + 1u;
                 if (ISO) {
                     // The first crossing of the isovalue, opaque and shaded;
                     // a tool may cut it away (opacity 0) or fade it.
@@ -261,6 +341,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         let p = o + d * tc;
                         let nd = snell(d, gradient(leaf, p), nu_prev, smp.refraction);
                         if (any(nd != d)) {
+                            t_base = t_base + tc;
                             o = p;
                             d = nd;
                             bent = true;
@@ -322,6 +403,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     ray.dir = d;
     chain_end(&ray, &acc);
     image[out] = vec4<f32>(acc.color, acc.alpha);
+    if (COUNT_SAMPLES) {
+        atomicAdd(&counters[0], n_samples);
+    }
     if (predicting) {
         prediction[out] = select(PB_MISS_SURFACE, hit_t, hit_t >= 0.0);
     }

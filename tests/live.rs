@@ -271,10 +271,10 @@ impl Client {
 /// port; returns its URL and the thread.
 fn serve_in_process(
     scene: PathBuf,
-    extra: impl FnOnce(&mut parallax_frontend::live::ServeOptions),
+    backends: usize,
 ) -> (String, std::thread::JoinHandle<anyhow::Result<()>>) {
     let (tx, rx) = std::sync::mpsc::channel();
-    let mut opts = parallax_frontend::live::ServeOptions {
+    let opts = parallax_frontend::live::ServeOptions {
         scene: scene.clone(),
         display: None,
         bind: "127.0.0.1:0".parse().unwrap(),
@@ -287,9 +287,8 @@ fn serve_in_process(
         ready: Some(tx),
         eye_view: parallax::launch::eye_view,
     };
-    extra(&mut opts);
     let t = std::thread::spawn(move || {
-        parallax::launch::embedded(1, |t| parallax_frontend::live::serve(opts, t))
+        parallax::launch::embedded(backends, |t| parallax_frontend::live::serve(opts, t))
     });
     let url = rx.recv_timeout(WAIT).expect("the server did not start");
     (url, t)
@@ -306,7 +305,7 @@ fn runtime() -> tokio::runtime::Runtime {
 fn a_websocket_client_drives_the_desktop_view() {
     std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
     let w = World::new([96, 72]);
-    let (url, server) = serve_in_process(w.path("desktop-scene.toml"), |_| {});
+    let (url, server) = serve_in_process(w.path("desktop-scene.toml"), 1);
     runtime().block_on(async {
         let mut a = Client::connect(&url).await;
         let first = a.settled(1).await;
@@ -771,7 +770,7 @@ fn a_real_browser_drags_the_volume_round() {
         chromium.display()
     );
     let w = World::new([320, 240]);
-    let (url, server) = serve_in_process(w.path("desktop-scene.toml"), |_| {});
+    let (url, server) = serve_in_process(w.path("desktop-scene.toml"), 1);
     let profile = w.path("chromium-profile");
     let mut browser = Command::new(chromium)
         .args([
@@ -961,24 +960,7 @@ fn latency_of_input_to_frame() {
         ("desktop 512×384", "desktop-scene.toml", 1),
         ("wall 8 × 160×90, eye view", "wall160-scene.toml", 2),
     ] {
-        let (tx, rx) = std::sync::mpsc::channel();
-        let opts = parallax_frontend::live::ServeOptions {
-            scene: w.path(scene),
-            display: None,
-            bind: "127.0.0.1:0".parse().unwrap(),
-            token: None,
-            out: None,
-            sync_io: false,
-            record: None,
-            record_dir: w.path("rec"),
-            watchdog: None,
-            ready: Some(tx),
-            eye_view: parallax::launch::eye_view,
-        };
-        let server = std::thread::spawn(move || {
-            parallax::launch::embedded(backends, |t| parallax_frontend::live::serve(opts, t))
-        });
-        let url = rx.recv_timeout(WAIT).unwrap();
+        let (url, server) = serve_in_process(w.path(scene), backends);
         let (lat, render) = runtime().block_on(async {
             let mut c = Client::connect(&url).await;
             c.settled(1).await;

@@ -135,7 +135,33 @@ pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
             ..base.clone()
         },
     ));
-    for e in [0.9, 0.95, 0.99] {
+    // L12's adaptive step (Eq. 3): step_factor 0.5 is λ = t·sin(θ/2).
+    for s in [0.25, 0.5, 1.0] {
+        sweeps.push((
+            "adaptive_step",
+            s,
+            "full",
+            RenderConfig {
+                step_factor: s,
+                adaptive_step: true,
+                ..base.clone()
+            },
+        ));
+    }
+    // The old curve: no empty-space skipping inside bricks.
+    for s in [0.125, 0.25, 0.5, 1.0] {
+        sweeps.push((
+            "step_factor_without_macrocells",
+            s,
+            "full",
+            RenderConfig {
+                step_factor: s,
+                macrocells: false,
+                ..base.clone()
+            },
+        ));
+    }
+    for e in [0.9, 0.95, 0.99, 0.995, 0.999] {
         sweeps.push((
             "early_termination",
             e,

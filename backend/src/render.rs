@@ -61,6 +61,11 @@ pub struct Renderer {
     /// The coarse copy of the volume the focus click is picked in, read on
     /// the first pick.
     pick_volume: Option<crate::pick::PickVolume>,
+    /// The pool's empty macrocells were marked under another transfer
+    /// function, or not kept up while macrocells were off.
+    cells_stale: bool,
+    /// Count the samples each frame takes (`FrameStats::samples`).
+    pub count_samples: bool,
 }
 
 /// A rendered frame: one premultiplied RGBA image per view, and its figures.
@@ -158,6 +163,8 @@ impl Renderer {
             tools: (0, Vec::new()),
             sync_io: false,
             pick_volume: None,
+            cells_stale: false,
+            count_samples: false,
         })
     }
 
@@ -194,6 +201,7 @@ impl Renderer {
         });
         // Last frame's visibility was for another transfer function.
         self.last.clear();
+        self.cells_stale = true;
         Ok(())
     }
 
@@ -310,6 +318,9 @@ impl Renderer {
             subframe: None,
             predict: [0.0; 4],
             tools,
+            macrocells: cfg.macrocells,
+            count_samples: self.count_samples,
+            adaptive_step: cfg.adaptive_step,
         }
     }
 
@@ -403,7 +414,20 @@ impl Renderer {
                 0.0
             };
             self.pool.upload(&self.gpu, u.slot, &u.data, norm);
+            if cfg.macrocells && !self.cells_stale {
+                self.pool
+                    .mark_cells(u.slot, &|lo, hi| tf.empty.is_empty(lo, hi));
+            }
         }
+        // A scene without macrocells pays nothing for them but the ranges
+        // taken at upload; switched on, every resident brick is marked.
+        if !cfg.macrocells {
+            self.cells_stale = true;
+        } else if std::mem::take(&mut self.cells_stale) {
+            self.pool
+                .mark_all_cells(&|lo, hi| tf.empty.is_empty(lo, hi));
+        }
+        self.pool.flush_cells(&self.gpu);
         stats.upload_ms = ms(t);
 
         let t = Instant::now();
@@ -461,6 +485,7 @@ impl Renderer {
             },
         )?;
         stats.render_ms = ms(t);
+        stats.samples = out.samples;
 
         // Visible nodes of this frame's feedback, pulled up to inner nodes
         // by the loader at the next refinement (G10 §5).

@@ -104,6 +104,16 @@ pub struct RenderConfig {
     /// B10 §4.4: a full traversal every this many frames (α).
     #[serde(default = "default_full_every")]
     pub full_traversal_every: u32,
+    /// Empty-space skipping inside bricks (L12 §4.1): macrocells that the
+    /// transfer function leaves empty are stepped over. Changes no pixel;
+    /// off only to measure what it saves.
+    #[serde(default = "yes")]
+    pub macrocells: bool,
+    /// L12 §4.4's adaptive step: the step is `step_factor` × the pixel's
+    /// footprint 2·t·sin(θ/2) at the leaf's distance t from the eye (0.5:
+    /// λ = t·sin(θ/2), Eq. 3) instead of `step_factor` × the leaf's voxel.
+    #[serde(default)]
+    pub adaptive_step: bool,
 }
 
 /// B10 found κ = 0.1…0.3 (steps of 3–10 voxels) good on its data; on the

@@ -123,6 +123,10 @@ pub struct FrameStats {
     /// offset): their parents stay leaves and the run goes on.
     #[serde(default)]
     pub bad_bricks: Vec<String>,
+    /// Samples the kernel took this frame (counted only when asked for:
+    /// benches and tests; else 0).
+    #[serde(default)]
+    pub samples: u64,
     /// Resident memory of this back end's process after the frame (bytes;
     /// in the embedded mode the whole process).
     #[serde(default)]

@@ -33,12 +33,12 @@ struct GpuFrame {
     domain: vec4<f32>,    // B·2^L·s: the root node's box (data units)
     spacing: vec4<f32>,   // s; w = min(s)
     tf: vec4<f32>,        // table vmin, bin width, bins, 0
-    render: vec4<f32>,    // step factor, early-termination opacity, probe offset (root units: 1% of a source voxel), 0
+    render: vec4<f32>,    // step factor, early-termination opacity, probe offset (root units: 1% of a source voxel), adaptive step (1: L12 Eq. 3)
     light: vec4<f32>,     // Phong ka, kd, ks, shininess
     counts: vec4<u32>,    // B, leaf level L, table levels, running-integral offset (0: none)
     pool: vec4<u32>,      // slots per axis x, y, z; stored brick side B + 2·OVERLAP
     optics: vec4<f32>,    // MImDA γ, the transfer function's largest importance, 0, 0
-    aux: vec4<u32>,       // (ι, ν, 0, 0) table: first entry, running-integral offset (0: none), 0, 0
+    aux: vec4<u32>,       // (ι, ν, 0, 0) table: first entry, running-integral offset (0: none); macrocells per brick axis C, voxels per cell side M
     iso: vec4<f32>,       // isovalue, the surface's linear RGB colour (mode "iso")
     predict: vec4<f32>,   // prediction buffer: mode (0 off, 1 full traversal, 2 predicted), local window (data units), κ low, κ high
     tf_offsets: array<vec4<u32>, 8>,  // pyramid level offsets (32)
@@ -57,7 +57,15 @@ struct ToolParams {
 @group(0) @binding(1) var<storage, read> views: array<GpuView>;
 @group(0) @binding(2) var<storage, read> index: array<IndexNode>;
 @group(0) @binding(3) var pool: texture_3d<f32>;
-@group(0) @binding(4) var<storage, read> slot_range: array<vec4<f32>>;  // (min, max − min, variance on [0, 1] among bricks, 0) per slot
+// Per pool slot: its value range, and its empty macrocells (L12 §4.1): 16
+// words of bits, one per cell of the brick (C³ ≤ 512 cells of M³ voxels),
+// set where the transfer function is τ ≡ 0 over every value interpolation
+// there can give.
+struct Slot {
+    range: vec4<f32>,         // min, max − min, variance on [0, 1] among bricks, 0
+    cells: array<u32, 16>,
+}
+@group(0) @binding(4) var<storage, read> slots: array<Slot>;
 // (τ, k̃r, k̃g, k̃b) interleaved: node values, then the pyramid levels.
 @group(0) @binding(5) var<storage, read> table: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> feedback: array<u32>;
@@ -67,3 +75,5 @@ struct ToolParams {
 // Isosurfaces: each pixel's last hit distance along its ray (volume units),
 // or PB_MISS_SURFACE / PB_MISS_BOX (B10 §4.1). Read and written per pixel.
 @group(0) @binding(10) var<storage, read_write> prediction: array<f32>;
+// Samples taken this frame (COUNT_SAMPLES), a 64-bit count: low, high.
+@group(0) @binding(11) var<storage, read_write> counters: array<atomic<u32>, 4>;

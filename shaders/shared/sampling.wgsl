@@ -82,7 +82,7 @@ fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
         let c11 = mix(tap(o, vec3<i32>(i0.x, i1.y, i1.z)), tap(o, i1), w.x);
         v = mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
     }
-    let r = slot_range[leaf.slot];
+    let r = slots[leaf.slot].range;
     return r.x + r.y * v;
 }
 

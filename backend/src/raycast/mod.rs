@@ -12,7 +12,7 @@ use crate::store::OctreeLayout;
 use anyhow::{bail, Result};
 use parallax_common::camera::{Placement, View, MAX_FRAME_PIXELS, MAX_VIEW_SIDE};
 use parallax_common::tf::{Channel, PreintLayout, PreintTable};
-use parallax_common::tools::MAX_ENHANCERS;
+use parallax_common::tools::{EnhancerKind, MAX_ENHANCERS};
 pub use params::ToolParams;
 use params::{GpuFrame, GpuView};
 pub use pool::BrickPool;
@@ -186,6 +186,16 @@ pub struct RenderSettings {
     pub predict: [f32; 4],
     /// The enhancers' constant parameters, in chain order.
     pub tools: [ToolParams; MAX_ENHANCERS],
+    /// Step over empty macrocells (L12 §4.1) where the kernel allows it
+    /// (plain DVR: no enhancer, MImDA, refraction or isosurface, which may
+    /// act where τ = 0).
+    pub macrocells: bool,
+    /// Count the samples taken (`Rendered::samples`).
+    pub count_samples: bool,
+    /// L12's adaptive step (Eq. 3): `step_factor` × 2·t·sin(θ/2), a
+    /// fraction of the pixel's footprint at the leaf's distance, instead of
+    /// the leaf's voxel.
+    pub adaptive_step: bool,
 }
 
 impl Default for RenderSettings {
@@ -200,6 +210,9 @@ impl Default for RenderSettings {
             subframe: None,
             predict: [0.0; 4],
             tools: [ToolParams::default(); MAX_ENHANCERS],
+            macrocells: true,
+            count_samples: false,
+            adaptive_step: false,
         }
     }
 }
@@ -229,6 +242,8 @@ pub struct Rendered {
     /// The prediction buffer was asked for but had just been (re)made, so
     /// this frame was a full traversal that fills it.
     pub prediction_reset: bool,
+    /// Samples taken (0 unless counted).
+    pub samples: u64,
 }
 
 pub struct Raycaster {
@@ -239,7 +254,7 @@ pub struct Raycaster {
     /// One pipeline per combination of stepper, enhancers and shading that
     /// a frame has used (G10 §5: a kernel specialised for what the scene
     /// uses), built when first needed.
-    pipelines: HashMap<(KernelKey, bool, bool), wgpu::ComputePipeline>,
+    pipelines: HashMap<(KernelKey, [bool; 4]), wgpu::ComputePipeline>,
     /// The pool holds f32 values (else 8-bit codes).
     float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
@@ -309,6 +324,9 @@ struct FrameBuffers {
     /// mean nothing after it is made or grown.
     prediction: Grown,
     prediction_fresh: bool,
+    /// Samples taken this frame, a 64-bit count in two words (counted only
+    /// when asked for).
+    counters: wgpu::Buffer,
     /// The bind group and the (table, pool) it was made for.
     bind: Option<(wgpu::BindGroup, u64, u64)>,
     /// Buffers made and bind groups made so far (reuse is checked by tests).
@@ -329,6 +347,8 @@ const FEEDBACK: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_DST);
 const IMAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC);
 const PREDICTION: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE;
+/// Bytes of the sample counters.
+const COUNTERS: u64 = 16;
 const READBACK: wgpu::BufferUsages =
     wgpu::BufferUsages::MAP_READ.union(wgpu::BufferUsages::COPY_DST);
 
@@ -348,9 +368,15 @@ impl FrameBuffers {
             readback: Grown::new(gpu, "readback", READBACK, 0),
             prediction: Grown::new(gpu, "prediction buffer", PREDICTION, 0),
             prediction_fresh: true,
+            counters: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("sample counters"),
+                size: COUNTERS,
+                usage: FEEDBACK,
+                mapped_at_creation: false,
+            }),
             bind: None,
             made: FrameBufferCounts {
-                buffers: 7,
+                buffers: 8,
                 bind_groups: 0,
             },
         }
@@ -371,7 +397,7 @@ impl FrameBuffers {
         self.prediction_fresh |= grown[4];
         let readback = self
             .readback
-            .fit(gpu, "readback", READBACK, image + index / 6);
+            .fit(gpu, "readback", READBACK, image + index / 6 + COUNTERS);
         self.made.buffers += grown.iter().filter(|&&g| g).count() as u64 + readback as u64;
         if grown.contains(&true) {
             self.bind = None;
@@ -466,6 +492,7 @@ impl Raycaster {
                         count: None,
                     },
                     storage(10, false),
+                    storage(11, false),
                 ],
             });
         let filter = if hw_filter {
@@ -514,10 +541,9 @@ impl Raycaster {
         &mut self,
         gpu: &Gpu,
         kernel: &KernelKey,
-        shading: bool,
-        no_data: bool,
+        [shading, no_data, macrocells, count]: [bool; 4],
     ) -> Result<&wgpu::ComputePipeline> {
-        let key = (kernel.clone(), shading, no_data);
+        let key = (kernel.clone(), [shading, no_data, macrocells, count]);
         if !self.pipelines.contains_key(&key) {
             let source = shader::kernel(kernel)?;
             let module = gpu.validated("shaders/raycast.wgsl", || {
@@ -533,6 +559,8 @@ impl Raycaster {
                 // Hardware filtering would blend the no-data value in.
                 ("HW_FILTER", flag(self.hw_filter && !no_data)),
                 ("NO_DATA", flag(no_data)),
+                ("MACROCELLS", flag(macrocells)),
+                ("COUNT_SAMPLES", flag(count)),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
                 (
@@ -622,6 +650,7 @@ impl Raycaster {
                 feedback: vec![0; index.len()],
                 seconds: 0.0,
                 prediction_reset: false,
+                samples: 0,
             });
         }
         let mut frame = self.frame_uniform(pool, tf, scene, settings);
@@ -696,6 +725,10 @@ impl Raycaster {
                         binding: 10,
                         resource: fr.prediction.buffer.as_entire_binding(),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 11,
+                        resource: fr.counters.as_entire_binding(),
+                    },
                 ],
             });
             self.frame.bind = Some((bind, tf.id, pool.id));
@@ -705,14 +738,32 @@ impl Raycaster {
             .write_buffer(&self.tools, 0, bytemuck::cast_slice(&settings.tools));
         let max_w = views.iter().map(|v| v.resolution[0]).max().unwrap_or(0);
         let max_h = views.iter().map(|v| v.resolution[1]).max().unwrap_or(0);
+        let k = &settings.kernel;
+        let plain = !k.mimda
+            && !k.refraction
+            && !k.iso
+            && k.enhancers.iter().all(|&e| e == EnhancerKind::PassThrough);
+        let macrocells = settings.macrocells && plain && pool.cells.per_axis > 0;
         let pipeline = self
-            .pipeline(gpu, &settings.kernel, settings.shading, pool.no_data)?
+            .pipeline(
+                gpu,
+                &settings.kernel,
+                [
+                    settings.shading,
+                    pool.no_data,
+                    macrocells,
+                    settings.count_samples,
+                ],
+            )?
             .clone();
         let fr = &self.frame;
         let bind = &fr.bind.as_ref().expect("made above").0;
         let mut enc = dev.create_command_encoder(&Default::default());
         // One zeroing per frame for all views (G10 §5).
         enc.clear_buffer(&fr.feedback.buffer, 0, Some(fb_size));
+        if settings.count_samples {
+            enc.clear_buffer(&fr.counters, 0, None);
+        }
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&pipeline);
@@ -732,9 +783,16 @@ impl Raycaster {
             img_size,
             fb_size,
         );
+        enc.copy_buffer_to_buffer(
+            &fr.counters,
+            0,
+            &fr.readback.buffer,
+            img_size + fb_size,
+            COUNTERS,
+        );
         gpu.queue.submit([enc.finish()]);
         let readback = &fr.readback.buffer;
-        let slice = readback.slice(..img_size + fb_size);
+        let slice = readback.slice(..img_size + fb_size + COUNTERS);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
@@ -753,6 +811,14 @@ impl Raycaster {
             let feedback =
                 bytemuck::cast_slice(&data[img_size as usize..(img_size + fb_size) as usize])
                     .to_vec();
+            let c: &[u32] = bytemuck::cast_slice(
+                &data[(img_size + fb_size) as usize..(img_size + fb_size + COUNTERS) as usize],
+            );
+            let samples = if settings.count_samples {
+                c[0] as u64 | (c[1] as u64) << 32
+            } else {
+                0
+            };
             drop(data);
             readback.unmap();
             Ok(Rendered {
@@ -760,6 +826,7 @@ impl Raycaster {
                 feedback,
                 seconds: start.elapsed().as_secs_f64(),
                 prediction_reset,
+                samples,
             })
         }
     }
@@ -815,7 +882,7 @@ impl Raycaster {
                 s.step_factor,
                 s.early_termination,
                 (0.01 / root) as f32,
-                0.0,
+                if s.adaptive_step { 1.0 } else { 0.0 },
             ],
             light: [0.35, 0.65, 0.25, 24.0],
             counts: [
@@ -826,7 +893,12 @@ impl Raycaster {
             ],
             pool: [pool.grid[0], pool.grid[1], pool.grid[2], pool.side],
             optics: [s.gamma, tf.max_importance, 0.0, 0.0],
-            aux: [tf.aux_base, tf.aux_prefix, 0, 0],
+            aux: [
+                tf.aux_base,
+                tf.aux_prefix,
+                pool.cells.per_axis,
+                pool.cells.voxels,
+            ],
             iso: s.iso,
             predict: s.predict,
             tf_offsets,

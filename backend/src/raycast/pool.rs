@@ -10,10 +10,123 @@ use anyhow::{bail, Result};
 /// threshold is 1e38 there).
 pub const NO_DATA_VALUE: f32 = 3.0e38;
 
+/// Bits of one slot's empty-macrocell mask: up to 8³ cells.
+pub const CELL_WORDS: u32 = 16;
+
+/// Bytes of one slot's entry in the ranges buffer: its range (a vec4), then
+/// its cell bits.
+const SLOT_BYTES: u64 = 16 + CELL_WORDS as u64 * 4;
+
+/// Empty-space skipping inside bricks (L12 §4.1): each slot's B³ core is
+/// cut into C³ macrocells of M³ voxels, and each cell keeps the value range
+/// of the voxels that interpolation anywhere inside it reads (its voxels
+/// and one more on every side). A cell whose range the transfer function
+/// maps to τ ≡ 0 (the emptiness table: exact at bin granularity,
+/// conservative) is empty; the kernel steps over it. Every segment it skips
+/// would have added exactly nothing (both ends' values lie in the range, so
+/// the pre-integrated segment is zero), and the samples after it fall where
+/// they would have: the image does not change.
+///
+/// The ranges come from the decoded brick at upload (one pass over its
+/// values), not from the database: every `.pxo` gets them, old or new.
+pub struct Macrocells {
+    /// Cells per axis C (0: bricks whose side no cell size divides; none).
+    pub per_axis: u32,
+    /// Voxels per cell side M.
+    pub voxels: u32,
+    /// Per slot, C³ (lo, hi) data-value ranges (lo > hi: the cell has no
+    /// data at all).
+    ranges: Vec<[f32; 2]>,
+    /// Per slot, [`CELL_WORDS`] words of empty bits.
+    bits: Vec<u32>,
+    /// Slots whose bits changed since the last flush, or all of them.
+    dirty: Vec<u32>,
+    all_dirty: bool,
+}
+
+impl Macrocells {
+    /// The cell size for bricks of side `b`: 4 voxels, doubled until at
+    /// most 8 cells per axis; none when it does not divide `b`.
+    pub fn layout(b: u32) -> (u32, u32) {
+        let mut m = 4;
+        while b / m > 8 {
+            m *= 2;
+        }
+        if b >= m && b.is_multiple_of(m) {
+            (b / m, m)
+        } else {
+            (0, m)
+        }
+    }
+
+    fn cells(&self) -> usize {
+        (self.per_axis * self.per_axis * self.per_axis) as usize
+    }
+
+    /// The ranges of one uploaded brick, from the (B+4)³ values the kernel
+    /// interpolates (`value(i)`: the data value of stored voxel i, None
+    /// for no data).
+    fn set_ranges(&mut self, slot: u32, side: u32, value: impl Fn(usize) -> Option<f64>) {
+        let (c, m) = (self.per_axis as usize, self.voxels as usize);
+        let s = side as usize;
+        let n = self.cells();
+        for cz in 0..c {
+            for cy in 0..c {
+                for cx in 0..c {
+                    // Interpolation at core coordinate u ∈ [c·M, (c+1)·M]
+                    // (voxel centres at i + ½) reads core voxels c·M − 1 …
+                    // (c+1)·M, stored 2 further on (the overlap).
+                    let span = |k: usize| k * m + 1..=(k + 1) * m + 2;
+                    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                    for z in span(cz) {
+                        for y in span(cy) {
+                            for x in span(cx) {
+                                if let Some(v) = value((z * s + y) * s + x) {
+                                    lo = lo.min(v);
+                                    hi = hi.max(v);
+                                }
+                            }
+                        }
+                    }
+                    self.ranges[slot as usize * n + (cz * c + cy) * c + cx] =
+                        [lo as f32, hi as f32];
+                }
+            }
+        }
+    }
+
+    /// Marks the empty cells of `slot` under `empty(lo, hi)`.
+    fn mark(&mut self, slot: u32, empty: &dyn Fn(f64, f64) -> bool) {
+        let n = self.cells();
+        let words =
+            &mut self.bits[(slot * CELL_WORDS) as usize..((slot + 1) * CELL_WORDS) as usize];
+        words.fill(0);
+        for (i, r) in self.ranges[slot as usize * n..(slot as usize + 1) * n]
+            .iter()
+            .enumerate()
+        {
+            let [lo, hi] = r.map(f64::from);
+            // Widened by a little more than the kernel's f32 rounding of
+            // its values: never empty where a sample could fall outside.
+            let pad = 1e-5 * (lo.abs().max(hi.abs()) + (hi - lo).abs()) + f64::MIN_POSITIVE;
+            if lo > hi || empty(lo - pad, hi + pad) {
+                words[i / 32] |= 1 << (i % 32);
+            }
+        }
+        if !self.all_dirty {
+            self.dirty.push(slot);
+        }
+    }
+}
+
 pub struct BrickPool {
     pub(crate) texture: wgpu::Texture,
     pub(crate) view: wgpu::TextureView,
     pub(crate) ranges: wgpu::Buffer,
+    /// Empty-space skipping inside bricks.
+    pub cells: Macrocells,
+    /// Slots that hold a brick.
+    filled: Vec<bool>,
     /// Slots along x, y, z.
     pub grid: [u32; 3],
     /// Texels per side of a slot.
@@ -76,16 +189,30 @@ impl BrickPool {
             view_formats: &[],
         });
         let view = texture.create_view(&Default::default());
+        // Per slot (the kernel's `Slot`): its value range (16 bytes), then
+        // its empty-macrocell bits.
         let ranges = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("brick ranges"),
-            size: grid.iter().product::<u32>() as u64 * 16,
+            label: Some("brick ranges and macrocells"),
+            size: grid.iter().product::<u32>() as u64 * SLOT_BYTES,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let total = grid.iter().product::<u32>();
+        let (per_axis, voxels) = Macrocells::layout(side.saturating_sub(4));
+        let cells = Macrocells {
+            per_axis,
+            voxels,
+            ranges: vec![[1.0, 0.0]; total as usize * (per_axis as usize).pow(3)],
+            bits: vec![0; (total * CELL_WORDS) as usize],
+            dirty: Vec::new(),
+            all_dirty: false,
+        };
         Ok(BrickPool {
             texture,
             view,
             ranges,
+            cells,
+            filled: vec![false; total as usize],
             grid,
             side,
             float,
@@ -97,6 +224,71 @@ impl BrickPool {
 
     pub fn slots(&self) -> u32 {
         self.grid.iter().product()
+    }
+
+    /// Marks the empty macrocells of `slot` (just uploaded) under the
+    /// transfer function's emptiness test.
+    pub fn mark_cells(&mut self, slot: u32, empty: &dyn Fn(f64, f64) -> bool) {
+        if self.cells.per_axis > 0 {
+            self.cells.mark(slot, empty);
+        }
+    }
+
+    /// Marks every filled slot's empty macrocells anew (a new transfer
+    /// function).
+    pub fn mark_all_cells(&mut self, empty: &dyn Fn(f64, f64) -> bool) {
+        if self.cells.per_axis == 0 {
+            return;
+        }
+        self.cells.all_dirty = true;
+        self.cells.dirty.clear();
+        for slot in 0..self.slots() {
+            if self.filled[slot as usize] {
+                self.cells.mark(slot, empty);
+            }
+        }
+    }
+
+    /// Sends changed empty-cell bits to the GPU.
+    pub fn flush_cells(&mut self, gpu: &Gpu) {
+        let c = &mut self.cells;
+        if std::mem::take(&mut c.all_dirty) {
+            c.dirty = (0..self.filled.len() as u32)
+                .filter(|&s| self.filled[s as usize])
+                .collect();
+        }
+        // Only the slots just marked: bricks stream in a few a frame.
+        c.dirty.sort_unstable();
+        c.dirty.dedup();
+        let w = CELL_WORDS as usize;
+        for &slot in &c.dirty {
+            let words = &c.bits[slot as usize * w..(slot as usize + 1) * w];
+            gpu.queue.write_buffer(
+                &self.ranges,
+                slot as u64 * SLOT_BYTES + 16,
+                bytemuck::cast_slice(words),
+            );
+        }
+        c.dirty.clear();
+    }
+
+    /// Fraction of the filled slots' macrocells that are empty now.
+    pub fn empty_cell_fraction(&self) -> f64 {
+        let n = self.cells.cells();
+        let (mut empty, mut all) = (0usize, 0usize);
+        for slot in 0..self.slots() as usize {
+            if self.filled[slot] {
+                let w =
+                    &self.cells.bits[slot * CELL_WORDS as usize..(slot + 1) * CELL_WORDS as usize];
+                empty += w.iter().map(|x| x.count_ones() as usize).sum::<usize>();
+                all += n;
+            }
+        }
+        if all == 0 {
+            0.0
+        } else {
+            empty as f64 / all as f64
+        }
     }
 
     /// Bytes uploaded so far.
@@ -168,9 +360,28 @@ impl BrickPool {
                 depth_or_array_layers: s,
             },
         );
+        if self.cells.per_axis > 0 {
+            if self.float {
+                self.cells.set_ranges(slot, s, |i| {
+                    let v = values[i];
+                    (!v.is_nan()).then_some(v as f64)
+                });
+            } else {
+                let (lo, scale) = (range[0] as f64, range[1] as f64 / 255.0);
+                let nan = has_nan;
+                self.cells.set_ranges(slot, s, |i| {
+                    let q = bytes[i];
+                    (!(nan && q == 255)).then_some(lo + scale * q as f64)
+                });
+            }
+        }
+        self.filled[slot as usize] = true;
         let entry = [range[0], range[1], variance.clamp(0.0, 1.0), 0.0];
-        gpu.queue
-            .write_buffer(&self.ranges, slot as u64 * 16, bytemuck::cast_slice(&entry));
+        gpu.queue.write_buffer(
+            &self.ranges,
+            slot as u64 * SLOT_BYTES,
+            bytemuck::cast_slice(&entry),
+        );
         self.uploaded += bytes.len() as u64;
     }
 }

@@ -71,7 +71,14 @@ const KERNEL: &str = include_str!("../../../shaders/raycast.wgsl");
 
 /// The pipeline-overridable constants of the kernel (each is also part of
 /// a pipeline's identity).
-pub const OVERRIDES: &[&str] = &["SHADING", "HW_FILTER", "NO_DATA", "NO_DATA_TAP"];
+pub const OVERRIDES: &[&str] = &[
+    "SHADING",
+    "HW_FILTER",
+    "NO_DATA",
+    "NO_DATA_TAP",
+    "MACROCELLS",
+    "COUNT_SAMPLES",
+];
 
 /// One specialised kernel: the stepper and the enhancer chain.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]

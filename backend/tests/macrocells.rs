@@ -1,0 +1,204 @@
+//! Empty-space skipping inside bricks (L12 §4.1): with macrocells the
+//! kernel steps over cells that the transfer function leaves empty. Every
+//! image must stay the same bit for bit, and the samples taken per frame
+//! must fall; each test prints by how much.
+
+mod support;
+use parallax_backend::data::{self, write_synth, SynthKind};
+use parallax_backend::render::Renderer;
+use parallax_backend::store::{self, BrickEncoding, ImportOptions};
+use parallax_backend::volume::VoxelType;
+use parallax_common::camera::{Placement, View};
+use parallax_common::config::{Interpolation, RenderConfig, Shading};
+use parallax_common::tf::TransferFunction;
+use std::path::Path;
+
+const COLIN27: &str = "/usr/share/mricron/templates/ch2.nii.gz";
+
+fn configs() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
+}
+
+fn import(src: &Path, db: &Path, encoding: BrickEncoding) {
+    store::import(
+        data::open(src, None).unwrap().as_mut(),
+        db,
+        "test volume",
+        &ImportOptions {
+            encoding,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+}
+
+/// Renders the converged frame with and without macrocells; asserts the
+/// images are equal bit for bit; returns the samples of each.
+fn compare(
+    what: &str,
+    db: &Path,
+    tf: &TransferFunction,
+    placement: &Placement,
+    cfg: &RenderConfig,
+) -> (u64, u64) {
+    let view = View::window([160, 120], [0.4, 0.3], [0.0, 0.0, 0.8]);
+    let run = |macrocells: bool| {
+        let cfg = RenderConfig {
+            macrocells,
+            ..cfg.clone()
+        };
+        let mut r = Renderer::new(db, &cfg).unwrap();
+        r.set_transfer_function(1, tf).unwrap();
+        r.count_samples = true;
+        let f = r.converge(placement, &[view], &cfg, 64).unwrap();
+        (f.images.into_iter().next().unwrap(), f.stats.samples)
+    };
+    let (on, s_on) = run(true);
+    let (off, s_off) = run(false);
+    let lit = on.iter().filter(|p| p[3] > 0.01).count();
+    println!(
+        "{what}: samples per frame {s_off} → {s_on} with macrocells ({:.1}% fewer); {lit} of {} pixels lit",
+        100.0 * (1.0 - s_on as f64 / s_off as f64),
+        on.len()
+    );
+    assert!(lit > on.len() / 20, "{what}: the volume is visible");
+    let differing = on
+        .iter()
+        .zip(&off)
+        .filter(|(a, b)| a.map(f32::to_bits) != b.map(f32::to_bits))
+        .count();
+    assert_eq!(differing, 0, "{what}: pixels that differ with macrocells");
+    assert!(
+        s_off > 0 && s_on < s_off,
+        "{what}: samples {s_off} → {s_on}"
+    );
+    (s_on, s_off)
+}
+
+fn colin_placement() -> Placement {
+    Placement {
+        center: [0.0, 0.0, 0.0],
+        rotation_deg: [-90.0, 180.0, 0.0],
+        size: 0.25,
+    }
+}
+
+#[test]
+fn colin27_skin_and_brain_unchanged_with_fewer_samples() {
+    if !Path::new(COLIN27).exists() {
+        eprintln!("SKIPPED: {COLIN27} is not installed (apt: mricron-data)");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("colin.pxo");
+    import(Path::new(COLIN27), &db, BrickEncoding::U8Range);
+    let phong = RenderConfig {
+        shading: Shading::Phong,
+        ..RenderConfig::default()
+    };
+    for (name, cfg) in [
+        ("opaque skin, Phong", &phong),
+        ("skin, defaults", &RenderConfig::default()),
+    ] {
+        let tf = TransferFunction::load(configs().join("tf/colin27-skin.toml")).unwrap();
+        compare(
+            &format!("Colin27 {name}"),
+            &db,
+            &tf,
+            &colin_placement(),
+            cfg,
+        );
+    }
+    let tf = TransferFunction::load(configs().join("tf/colin27-brain.toml")).unwrap();
+    compare(
+        "Colin27 translucent brain",
+        &db,
+        &tf,
+        &colin_placement(),
+        &RenderConfig::default(),
+    );
+}
+
+#[test]
+fn a_ct_with_much_air_unchanged_with_fewer_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("ct.nrrd");
+    write_synth(SynthKind::Ct, 96, VoxelType::I16, &src, |_| {}).unwrap();
+    let tf = TransferFunction::load(configs().join("tf/ct-bone.toml")).unwrap();
+    let placement = Placement {
+        center: [0.0; 3],
+        rotation_deg: [-70.0, 30.0, 0.0],
+        size: 0.25,
+    };
+    for (encoding, interpolation) in [
+        (BrickEncoding::U8Range, Interpolation::Hardware),
+        (BrickEncoding::F32, Interpolation::Exact),
+    ] {
+        let db = dir.path().join(format!("ct-{encoding:?}.pxo"));
+        import(&src, &db, encoding);
+        let cfg = RenderConfig {
+            interpolation,
+            early_termination: 1.0,
+            ..RenderConfig::default()
+        };
+        compare(
+            &format!("CT bone, {encoding:?} bricks, {interpolation:?} interpolation"),
+            &db,
+            &tf,
+            &placement,
+            &cfg,
+        );
+    }
+}
+
+/// L12 §4.4's adaptive step (Eq. 3, λ = t·sin(θ/2) at step_factor 0.5):
+/// moved twice as far from the eye, a volume gets about half the samples
+/// per ray it covers (the voxel step: as many); its error against the exact
+/// integral stays of the order of the voxel step's.
+#[test]
+fn the_adaptive_step_follows_the_distance_from_the_eye() {
+    use parallax_backend::reference::{self, Tolerance};
+    let dir = tempfile::tempdir().unwrap();
+    let vol = support::marschner_lobb(48);
+    let db = dir.path().join("ml.pxo");
+    support::import_volume(&vol, &db, 16, BrickEncoding::F32);
+    let tf = support::translucent();
+    let view = View::window([96, 72], [0.4, 0.3], [0.0, 0.0, 0.8]);
+    let run = |z: f64, adaptive: bool| {
+        let cfg = RenderConfig {
+            adaptive_step: adaptive,
+            step_factor: 0.5,
+            ..support::exact_config()
+        };
+        let placement = Placement {
+            center: [0.0, 0.0, z],
+            rotation_deg: [20.0, 35.0, 0.0],
+            size: 0.15,
+        };
+        let mut r = Renderer::new(&db, &cfg).unwrap();
+        r.set_transfer_function(1, &tf).unwrap();
+        r.count_samples = true;
+        let f = r.converge(&placement, &[view], &cfg, 64).unwrap();
+        let img = &f.images[0];
+        support::assert_valid("adaptive step", img);
+        let reference = reference::render(&vol, &tf, &placement, &view, Tolerance { abs: 1e-5 });
+        let (rmse, _) = support::error(img, &reference);
+        let lit = img.iter().filter(|p| p[3] > 0.02).count().max(1);
+        (f.stats.samples as f64 / lit as f64, rmse)
+    };
+    let (near, e_near) = run(0.0, true);
+    let (far, e_far) = run(-0.8, true);
+    let (fixed_near, e_fixed) = run(0.0, false);
+    let (fixed_far, _) = run(-0.8, false);
+    println!(
+        "adaptive step: {near:.0} samples per covered pixel 0.8 m from the eye (RMSE {e_near:.2e}), {far:.0} at 1.6 m (RMSE {e_far:.2e}); voxel step: {fixed_near:.0} and {fixed_far:.0} (RMSE {e_fixed:.2e} at 0.8 m)"
+    );
+    let ratio = far / near;
+    assert!(
+        (0.35..0.7).contains(&ratio),
+        "twice as far: {ratio:.2} of the samples per pixel"
+    );
+    let fixed = fixed_far / fixed_near;
+    assert!((0.8..1.25).contains(&fixed), "the voxel step: {fixed:.2}");
+    assert!(e_near < 4.0 * e_fixed.max(1e-4), "{e_near} vs {e_fixed}");
+}
