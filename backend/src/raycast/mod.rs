@@ -202,7 +202,7 @@ impl Default for RenderSettings {
     fn default() -> Self {
         RenderSettings {
             step_factor: 0.5,
-            early_termination: 0.99,
+            early_termination: 0.999,
             shading: false,
             kernel: KernelKey::default(),
             gamma: 0.0,
