@@ -27,7 +27,7 @@ pub fn session(
     coordinate: impl FnOnce(&mut dyn Transport) -> Result<()>,
 ) -> Result<Role> {
     if parallax_frontend::cluster::launched_by_mpi() {
-        return mpi_session(scene, display, coordinate);
+        return mpi_session(coordinate);
     }
     let n = match backends {
         Some(n) => n,
@@ -39,11 +39,7 @@ pub fn session(
 
 /// The cluster mode, under `mpirun -n K` (one MPI process alone runs the
 /// embedded mode).
-fn mpi_session(
-    scene: &Path,
-    display: Option<&PathBuf>,
-    coordinate: impl FnOnce(&mut dyn Transport) -> Result<()>,
-) -> Result<Role> {
+fn mpi_session(coordinate: impl FnOnce(&mut dyn Transport) -> Result<()>) -> Result<Role> {
     use mpi::traits::Communicator;
     let universe = mpi::initialize().context("MPI initialisation failed")?;
     let world = universe.world();
@@ -57,7 +53,6 @@ fn mpi_session(
     );
     if size < 2 {
         drop(universe);
-        let _ = (scene, display);
         embedded(1, coordinate)?;
         return Ok(Role::Coordinator);
     }

@@ -272,25 +272,6 @@ impl BrickPool {
         c.dirty.clear();
     }
 
-    /// Fraction of the filled slots' macrocells that are empty now.
-    pub fn empty_cell_fraction(&self) -> f64 {
-        let n = self.cells.cells();
-        let (mut empty, mut all) = (0usize, 0usize);
-        for slot in 0..self.slots() as usize {
-            if self.filled[slot] {
-                let w =
-                    &self.cells.bits[slot * CELL_WORDS as usize..(slot + 1) * CELL_WORDS as usize];
-                empty += w.iter().map(|x| x.count_ones() as usize).sum::<usize>();
-                all += n;
-            }
-        }
-        if all == 0 {
-            0.0
-        } else {
-            empty as f64 / all as f64
-        }
-    }
-
     /// Bytes uploaded so far.
     pub fn uploaded_bytes(&self) -> u64 {
         self.uploaded

@@ -164,6 +164,7 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
         version: 1,
         tools: scene.tools.clone(),
     })?;
+    let hello = state::hello(&opts.scene, &scene, &display, &tf, &opts.record_dir).to_string();
     let state = LiveState::from_scene(&scene, &display, tf);
     let token = match &opts.token {
         Some(t) if t.is_empty() || !t.chars().all(|c| c.is_ascii_alphanumeric()) => {
@@ -186,7 +187,7 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
         notice_tx: broadcast::channel(16).0,
         ended_tx: watch::channel(None).0,
         token: token.clone(),
-        hello: state::hello(&opts.scene, &scene, &display, &opts.record_dir).to_string(),
+        hello,
         clients: Default::default(),
     });
 

@@ -123,13 +123,11 @@ pub fn hello(
     scene_path: &Path,
     scene: &Scene,
     display: &Display,
+    tf: &TransferFunction,
     record_dir: &Path,
 ) -> serde_json::Value {
-    let tf = TransferFunction::load(&scene.transfer_function).ok();
-    let range = tf.map_or([0.0, 1.0], |tf| {
-        let p = tf.points();
-        [p[0].value, p[p.len() - 1].value]
-    });
+    let p = tf.points();
+    let range = [p[0].value, p[p.len() - 1].value];
     let w = display.screen.size[0];
     serde_json::json!({
         "type": "hello",
