@@ -1,8 +1,11 @@
 #!/usr/bin/env python3
 """Parallax's GPU ray caster (on whatever adapter wgpu picks: lavapipe on the
 2-core reference machine) against VTK's CPU ray caster
-vtkFixedPointVolumeRayCastMapper, on the same 512×512 view of the Colin27 MRI,
-at matched step lengths, both measured against one reference image.
+vtkFixedPointVolumeRayCastMapper, on the same 512×512 view, at matched step
+lengths, both measured against one reference image. Three comparisons in one
+run (CASES): the Colin27 MRI with a translucent brain (the full study), the
+same head as opaque skin, and a 256³ CT phantom in Hounsfield units that is
+mostly air, under 3D Slicer's CT-Bone preset.
 
 What a pixel means (DESIGN.md): with shading off, the premultiplied
 emission–absorption integral C = ∫ τ c exp(−∫τ) dt, A = 1 − exp(−∫τ dt) along
@@ -370,6 +373,29 @@ def vtk_read_volume():
     return reader, dims, spacing, arr.reshape(dims[2], dims[1], dims[0])
 
 
+def read_nrrd(path):
+    """The raw little-endian NRRD `parallax synth` writes: (None, dims,
+    spacing, array z, y, x)."""
+    data = Path(path).read_bytes()
+    end = data.index(b"\n\n")
+    fields = {}
+    for line in data[:end].decode().splitlines()[1:]:
+        if line.startswith("#") or ":" not in line:
+            continue
+        k, v = line.split(":", 1)
+        fields[k.strip()] = v.strip()
+    assert fields["encoding"] == "raw" and fields.get("endian", "little") == "little", fields
+    types = {"short": "<i2", "signed short": "<i2", "int16": "<i2", "unsigned char": "u1", "uchar": "u1",
+             "ushort": "<u2", "unsigned short": "<u2", "uint8": "u1", "uint16": "<u2"}
+    dtype = np.dtype(types[fields["type"]])
+    dims = tuple(int(x) for x in fields["sizes"].split())
+    spacing = (1.0, 1.0, 1.0)
+    if "spacings" in fields:
+        spacing = tuple(float(x) for x in fields["spacings"].split())
+    arr = np.frombuffer(data[end + 2:], dtype=dtype, count=dims[0] * dims[1] * dims[2])
+    return None, dims, spacing, arr.reshape(dims[2], dims[1], dims[0])
+
+
 def vtk_setup(tf, placement, threads, domain, volume):
     """One VTK pipeline. domain:
     "box"     — Parallax's domain: the field clamped to the edge voxels inside
@@ -392,7 +418,9 @@ def vtk_setup(tf, placement, threads, domain, volume):
         image.SetSpacing(*spacing)
         # VTK puts voxel centres at origin + i·s: the padding layer at −½s.
         image.SetOrigin(*(-0.5 * s for s in spacing))
-        sc = ns.numpy_to_vtk(padded.ravel(), deep=1, array_type=vtk.VTK_UNSIGNED_CHAR)
+        vtk_type = {np.dtype("u1"): vtk.VTK_UNSIGNED_CHAR, np.dtype("<i2"): vtk.VTK_SHORT,
+                    np.dtype("<u2"): vtk.VTK_UNSIGNED_SHORT}[arr.dtype]
+        sc = ns.numpy_to_vtk(padded.ravel(), deep=1, array_type=vtk_type)
         image.GetPointData().SetScalars(sc)
         source = vtk.vtkTrivialProducer()
         source.SetOutput(image)
@@ -409,7 +437,7 @@ def vtk_setup(tf, placement, threads, domain, volume):
     # opacity per unit distance α = 1 − exp(−τ·1 mm) (piecewise-linear α is
     # not piecewise-linear τ, hence the dense sampling; VTK's tables are
     # indexed by integer data value anyway).
-    xs = np.arange(0, 256, dtype=float)
+    xs = np.arange(float(arr.min()), float(arr.max()) + 1.0)
     tau, col = tf_at(tf, xs)
     ctf = vtk.vtkColorTransferFunction()
     ctf.SetColorSpaceToRGB()
@@ -549,6 +577,20 @@ def fmt(x, spec):
     return "" if x == "" or x is None else format(x, spec)
 
 
+# The comparisons of one run: the translucent brain (the full study: both
+# brick encodings, early termination matched and off, VTK as it comes too),
+# then an opaque view and a CT that is mostly air (8-bit bricks, early
+# termination matched, VTK on Parallax's domain).
+CASES = [
+    dict(name="colin27-brain", title="Colin27 MRI, translucent brain", volume="colin27",
+         tf="../configs/tf/colin27-brain.toml", full=True),
+    dict(name="colin27-skin", title="Colin27 MRI, opaque skin", volume="colin27",
+         tf="../configs/tf/colin27-skin.toml", full=False),
+    dict(name="ct-bone", title="CT phantom 256³ (i16 Hounsfield units), CT-Bone", volume="ct",
+         tf="../configs/tf/ct-bone.toml", full=False),
+]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--parallax", default=str(ROOT / "target/release/parallax"))
@@ -558,21 +600,87 @@ def main():
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 2, help="VTK ray cast threads")
     ap.add_argument("--reuse", action="store_true", help="reuse Parallax runs whose scene is unchanged")
     ap.add_argument("--csv", default=str(BENCH / "vtk_results.csv"))
+    ap.add_argument("--cases", default=",".join(c["name"] for c in CASES),
+                    help="which comparisons (default: all)")
     a = ap.parse_args()
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     px = Path(a.parallax)
-    dbs = {"full": (out / "colin27-full.pxo").resolve(), "8-bit": (out / "colin27-8bit.pxo").resolve()}
+    volumes = {}
+    rows = []
+    summary = []
+    for case in CASES:
+        if case["name"] not in a.cases.split(","):
+            continue
+        if case["volume"] not in volumes:
+            volumes[case["volume"]] = (vtk_read_volume() if case["volume"] == "colin27"
+                                       else read_nrrd(out / "ct256.nrrd"))
+        log("")
+        log(f"==== {case['title']} ({case['name']})")
+        case_rows = run_case(case, a, px, out, volumes[case["volume"]])
+        rows += case_rows
+        summary.append((case, case_rows))
+
+    # ---- Table.
+    cols = ["case", "renderer", "config", "step_mm", "early_termination", "readback", "time_ms",
+            "rmse", "max_abs", "psnr_db", "cores", "other_cores"] + STAGES + ["light_frame_render_ms", "bricks", "adequate"]
+    with open(a.csv, "w", newline="") as f:
+        wr = csv.DictWriter(f, fieldnames=cols)
+        wr.writeheader()
+        for r in rows:
+            rr = dict(r)
+            for k in ["time_ms", "light_frame_render_ms"] + STAGES:
+                rr[k] = fmt(rr[k], ".1f")
+            for k in ["cores", "other_cores"]:
+                rr[k] = fmt(rr[k], ".2f")
+            rr["rmse"] = f"{rr['rmse']:.4e}"
+            rr["max_abs"] = f"{rr['max_abs']:.4e}"
+            rr["psnr_db"] = f"{rr['psnr_db']:.2f}"
+            wr.writerow(rr)
+    log("")
+    log("Summary: for each VTK setting (ray-cast image on Parallax's domain), the fastest Parallax "
+        "setting with early termination matched and an RMSE no larger, as the time ratio Parallax / VTK:")
+    for case, case_rows in summary:
+        log(f"  {case['title']}:")
+        for line in equal_error_pairs(case_rows):
+            log("    " + line)
+    log(f"\nwrote {a.csv}")
+
+
+def equal_error_pairs(rows):
+    lines = []
+    for vt in rows:
+        if not (vt["renderer"] == "vtk" and vt["config"].startswith("box") and vt["readback"].startswith("ray")):
+            continue
+        ok = [o for o in rows if o["renderer"] == "parallax" and o["early_termination"] < 1
+              and o["rmse"] <= vt["rmse"]]
+        if not ok:
+            lines.append(f"VTK {vt['step_mm']:5} mm (RMSE {vt['rmse']:.2e}, {vt['time_ms']:6.1f} ms): "
+                         "no Parallax setting as accurate")
+            continue
+        o = min(ok, key=lambda r: r["time_ms"])
+        lines.append(f"VTK {vt['step_mm']:5} mm (RMSE {vt['rmse']:.2e}, {vt['time_ms']:6.1f} ms) ↔ Parallax "
+                     f"{o['config']} {o['step_mm']} mm (RMSE {o['rmse']:.2e}, {o['time_ms']:6.1f} ms): "
+                     f"ratio {o['time_ms'] / vt['time_ms']:.2f}")
+    return lines
+
+
+def run_case(case, a, px, out, volume):
+    name = case["name"]
+    stem = "colin27" if case["volume"] == "colin27" else "ct256"
+    dbs = {"full": (out / f"{stem}-full.pxo").resolve(), "8-bit": (out / f"{stem}-8bit.pxo").resolve()}
     for k, p in dbs.items():
         if not p.exists():
             sys.exit(f"{p} missing: run bench/vtk_compare.sh (it imports the databases)")
 
     base = tomllib.loads((BENCH / "vtk_scene.toml").read_text())
+    base["transfer_function"] = case["tf"]
     tf = load_tf((BENCH / base["transfer_function"]).resolve())
     pl = base["placement"]
-    volume = vtk_read_volume()
     dims, spacing = volume[1], volume[2]
+    if case["volume"] == "ct":
+        log(f"air (below -900 HU): {(volume[3] < -900).mean() * 100:.0f}% of the voxels")
     extent = tuple(d * s for d, s in zip(dims, spacing))     # N·s: (181, 217, 181) mm
     placement = Placement(pl["center"], pl["size"], pl["rotation_deg"], extent)
     log(f"volume {dims} voxels of {spacing} mm, box {extent} mm; voxel order checked against the file")
@@ -582,22 +690,23 @@ def main():
     ref_render = dict(step_factor=0.0625, interpolation="exact", accuracy=0.01,
                       early_termination=1.0, visibility_feedback=False,
                       cpu_cache_mb=2048, gpu_cache_mb=1024, upload_budget=100000)
-    ref, ref_stats = run_parallax(px, "reference", base, dbs["full"], ref_render, out, a.frames, a.reuse,
-                                 timed=False)     # only its image counts
+    ref, ref_stats = run_parallax(px, f"{name}-reference", base, dbs["full"], ref_render, out, a.frames,
+                                 a.reuse, timed=False)     # only its image counts
     if not ref_stats["adequate"]:
         log("  WARNING: the reference's cut was not adequate over its last 3 frames")
 
     rows = []
     ours = {}
-    for bricks in ["8-bit", "full"]:
-        for et_name, et in [("vtk", VTK_EARLY_TERMINATION), ("off", 1.0)]:
+    for bricks in ["8-bit", "full"] if case["full"] else ["8-bit"]:
+        ets = [("vtk", VTK_EARLY_TERMINATION), ("off", 1.0)] if case["full"] else [("vtk", VTK_EARLY_TERMINATION)]
+        for et_name, et in ets:
             for s in STEPS + (EXTRA_STEPS if et < 1 else []):
-                name = f"ours-{bricks}-step{s}-et{et_name}"
-                img, st = run_parallax(px, name, base, dbs[bricks],
+                run = f"{name}-ours-{bricks}-step{s}-et{et_name}"
+                img, st = run_parallax(px, run, base, dbs[bricks],
                                        dict(step_factor=s, early_termination=et), out, a.frames, a.reuse)
                 rmse, mx, psnr = image_error(img, ref)
-                ours[name] = img
-                rows.append(dict(renderer="parallax", config=f"{bricks} bricks",
+                ours[f"ours-{bricks}-step{s}-et{et_name}"] = img
+                rows.append(dict(case=name, renderer="parallax", config=f"{bricks} bricks",
                                  step_mm=s, early_termination=round(et, 5), readback="float32",
                                  time_ms=st["render_ms"], rmse=rmse, max_abs=mx, psnr_db=psnr,
                                  cores=st["cores"], other_cores=st["other_cores"],
@@ -609,7 +718,7 @@ def main():
     log("VTK vtkFixedPointVolumeRayCastMapper:")
     vtk_imgs = {}
     infos = {}
-    for domain in ["box", "centres"]:
+    for domain in ["box", "centres"] if case["full"] else ["box"]:
         v = vtk_setup(tf, placement, a.threads, domain, volume)
         info = infos[domain] = v["info"]
         log(f"  domain '{domain}':")
@@ -626,9 +735,9 @@ def main():
                 f"median {t:.0f} ms, {cores:.2f} cores busy")
             vtk_imgs[(domain, s)] = (fb, rc)
             reads = [("ray-cast image 15-bit", rc), ("framebuffer 8-bit", fb)]
-            for readback, img in reads if domain == "box" else reads[:1]:
+            for readback, img in reads if domain == "box" and case["full"] else reads[:1]:
                 rmse, mx, psnr = image_error(img, ref)
-                rows.append(dict(renderer="vtk",
+                rows.append(dict(case=name, renderer="vtk",
                                  config="box [0,N·s]" if domain == "box" else "voxel-centre box",
                                  step_mm=s, early_termination=round(VTK_EARLY_TERMINATION, 5),
                                  readback=readback, time_ms=t, rmse=rmse, max_abs=mx, psnr_db=psnr,
@@ -643,8 +752,9 @@ def main():
     log(f"  reference                     ({c_ref[0]:.3f}, {c_ref[1]:.3f})")
     checks = [("vtk box, ray-cast image", vtk_imgs[("box", 0.25)][1], True),
               ("vtk box, framebuffer", vtk_imgs[("box", 0.25)][0], True),
-              ("vtk centres, ray-cast image", vtk_imgs[("centres", 0.25)][1], False),
               ("parallax 8-bit", ours["ours-8-bit-step0.25-etvtk"], True)]
+    if case["full"]:
+        checks.insert(2, ("vtk centres, ray-cast image", vtk_imgs[("centres", 0.25)][1], False))
     for nm, img, strict in checks:
         c = alpha_centroid(img)
         sh = best_shift(img, ref)
@@ -663,28 +773,12 @@ def main():
     top = np.concatenate([to_srgb8(ref), to_srgb8(rc5), to_srgb8(o5)], axis=1)
     err = lambda x: (np.clip(np.abs(x - ref).max(axis=-1) * 10.0, 0, 1) * 255).astype(np.uint8)
     bot = np.concatenate([np.repeat(err(x)[..., None], 3, axis=-1) for x in (ref, rc5, o5)], axis=1)
-    write_png(out / "compare.png", np.concatenate([top, bot], axis=0))
-    np.save(out / "reference.npy", ref)
-    np.save(out / "vtk_step0.5_raycast.npy", rc5)
-    np.save(out / "vtk_step0.5_framebuffer.npy", fb5)
-    np.save(out / "vtk_centres_step0.5_raycast.npy", vtk_imgs[("centres", 0.5)][1])
-
-    # ---- Table.
-    cols = ["renderer", "config", "step_mm", "early_termination", "readback", "time_ms",
-            "rmse", "max_abs", "psnr_db", "cores", "other_cores"] + STAGES + ["light_frame_render_ms", "bricks", "adequate"]
-    with open(a.csv, "w", newline="") as f:
-        wr = csv.DictWriter(f, fieldnames=cols)
-        wr.writeheader()
-        for r in rows:
-            rr = dict(r)
-            for k in ["time_ms", "light_frame_render_ms"] + STAGES:
-                rr[k] = fmt(rr[k], ".1f")
-            for k in ["cores", "other_cores"]:
-                rr[k] = fmt(rr[k], ".2f")
-            rr["rmse"] = f"{rr['rmse']:.4e}"
-            rr["max_abs"] = f"{rr['max_abs']:.4e}"
-            rr["psnr_db"] = f"{rr['psnr_db']:.2f}"
-            wr.writerow(rr)
+    write_png(out / f"{name}-compare.png", np.concatenate([top, bot], axis=0))
+    np.save(out / f"{name}-reference.npy", ref)
+    np.save(out / f"{name}-vtk_step0.5_raycast.npy", rc5)
+    np.save(out / f"{name}-vtk_step0.5_framebuffer.npy", fb5)
+    if case["full"]:
+        np.save(out / f"{name}-vtk_centres_step0.5_raycast.npy", vtk_imgs[("centres", 0.5)][1])
 
     log("")
     log(f"Reference: Parallax, full bricks, step 1/16 mm, exact interpolation, no early termination "
@@ -702,7 +796,7 @@ def main():
     for s in STEPS:
         vt = next(r for r in rows if r["renderer"] == "vtk" and r["step_mm"] == s
                   and r["config"].startswith("box") and r["readback"].startswith("ray"))
-        for bricks in ["8-bit", "full"]:
+        for bricks in ["8-bit", "full"] if case["full"] else ["8-bit"]:
             o = next(r for r in rows if r["renderer"] == "parallax" and r["step_mm"] == s
                      and r["config"].startswith(bricks) and r["early_termination"] < 1)
             log(f"  step {s:4} mm, {bricks:5s}: {o['time_ms']:7.1f} / {vt['time_ms']:7.1f} ms = "
@@ -711,20 +805,8 @@ def main():
     log("")
     log("At comparable error: for each VTK setting (box domain, ray-cast image), the fastest "
         "Parallax setting with early termination matched and an RMSE no larger:")
-    pairs = []
-    for vt in rows:
-        if not (vt["renderer"] == "vtk" and vt["config"].startswith("box") and vt["readback"].startswith("ray")):
-            continue
-        ok = [o for o in rows if o["renderer"] == "parallax" and o["early_termination"] < 1
-              and o["rmse"] <= vt["rmse"]]
-        if not ok:
-            log(f"  VTK {vt['step_mm']:5} mm (RMSE {vt['rmse']:.2e}, {vt['time_ms']:6.1f} ms): no Parallax setting as accurate")
-            continue
-        o = min(ok, key=lambda r: r["time_ms"])
-        pairs.append((vt, o))
-        log(f"  VTK {vt['step_mm']:5} mm (RMSE {vt['rmse']:.2e}, {vt['time_ms']:6.1f} ms) ↔ Parallax "
-            f"{o['config']} {o['step_mm']} mm (RMSE {o['rmse']:.2e}, {o['time_ms']:6.1f} ms): "
-            f"ratio {o['time_ms'] / vt['time_ms']:.2f}")
+    for line in equal_error_pairs(rows):
+        log("  " + line)
 
     log("")
     log("Where Parallax's time goes (median of the last 3 frames, ms):")
@@ -736,8 +818,9 @@ def main():
                 + f"  {r['light_frame_render_ms']:11.1f}  {r['bricks']:6} {r['adequate']}")
     log("  (light frame: render_ms of the lighter of frames 0-1, when nothing or only the coarse root "
         "brick is resident: an upper bound of the fixed per-frame cost of dispatch and image/feedback readback)")
-    log(f"\nwrote {a.csv}, {out / 'compare.png'} (reference | VTK 0.5 mm | Parallax 8-bit 0.5 mm; "
+    log(f"\nwrote {out / (name + '-compare.png')} (reference | VTK 0.5 mm | Parallax 8-bit 0.5 mm; "
         f"below: 10×|error|)")
+    return rows
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # Parallax vs VTK's vtkFixedPointVolumeRayCastMapper on the Colin27 MRI
+# (translucent brain, opaque skin) and a CT phantom that is mostly air
 # (bench/vtk_compare.py says what is measured and how). Installs what it
 # needs (vtk and numpy from PyPI; the project's own system packages through
 # scripts/setup.sh; xvfb only if VTK cannot render off screen), builds,
@@ -17,8 +18,13 @@ px=target/release/parallax
 out=out/bench-vtk
 src=/usr/share/mricron/templates/ch2.nii.gz
 mkdir -p "$out"
-[ -f "$out/colin27-full.pxo" ] || $px import "$src" -o "$out/colin27-full.pxo" --quantize none
-[ -f "$out/colin27-8bit.pxo" ] || $px import "$src" -o "$out/colin27-8bit.pxo" --quantize u8
+# Imported every run, so that the databases are in this build's format.
+$px import "$src" -o "$out/colin27-full.pxo" --quantize none
+$px import "$src" -o "$out/colin27-8bit.pxo" --quantize u8
+# The CT: a 256³ head phantom in Hounsfield units, mostly air.
+[ -f "$out/ct256.nrrd" ] || $px synth ct --size 256 --type i16 -o "$out/ct256.nrrd"
+$px import "$out/ct256.nrrd" -o "$out/ct256-full.pxo" --quantize none
+$px import "$out/ct256.nrrd" -o "$out/ct256-8bit.pxo" --quantize u8
 
 # VTK renders off screen through EGL (or OSMesa) on recent PyPI wheels; fall
 # back to a virtual X display only if that fails.

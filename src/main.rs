@@ -199,6 +199,11 @@ enum Command {
         /// The isovalue of --prediction.
         #[arg(long, default_value_t = 80.0)]
         isovalue: f64,
+        /// Only the level-of-detail error on a CT phantom with 4 mm slices
+        /// against the same phantom with isotropic voxels
+        /// (DIR/anisotropy.csv).
+        #[arg(long)]
+        anisotropy: bool,
         /// The interaction script --reconstruction and --prediction run
         /// (its first N frames).
         #[arg(long, default_value = "configs/scripts/rotate-1deg.toml")]
@@ -483,7 +488,13 @@ fn run(cli: Cli) -> Result<()> {
             prediction,
             isovalue,
             script,
+            anisotropy,
         } => {
+            if anisotropy {
+                parallax_backend::bench::run_anisotropy(&out)?;
+                println!("wrote {}/anisotropy.csv", out.display());
+                return Ok(());
+            }
             // The placements of the first `n` frames of the script, from the
             // desktop view of Colin27.
             let script_placements = |n: usize| -> Result<Vec<parallax_common::camera::Placement>> {

@@ -13,11 +13,18 @@ fn tf_offset(k: u32) -> u32 {
     return frame.tf_offsets[k >> 2u][k & 3u];
 }
 
-fn lerp4(base: u32, u: f32) -> vec4<f32> {
-    let n = u32(frame.tf.z);
-    let j = min(u32(u), n - 1u);
-    let t = u - f32(j);
-    return (1.0 - t) * table[base + j] + t * table[base + j + 1u];
+// The average over [j + ta, j + tb] (0 ≤ ta ≤ tb ≤ 1) of bin j's quadratic
+// through its nodes a, b and midpoint value m (common/src/tf/preint.rs:
+// in a bin without a control point inside, the transfer function exactly):
+// f at the centre plus f''·w²/24, exact, no division.
+fn bin_average(base: u32, j: u32, ta: f32, tb: f32) -> vec4<f32> {
+    let a = table[base + j];
+    let b = table[base + j + 1u];
+    let m = table[base + frame.tf_mids.x + j];
+    let t = 0.5 * (ta + tb);
+    let w = tb - ta;
+    let f = a * ((1.0 - t) * (1.0 - 2.0 * t)) + m * (4.0 * t * (1.0 - t)) + b * (t * (2.0 * t - 1.0));
+    return max(f + (a + b - 2.0 * m) * (w * w / 6.0), vec4<f32>(0.0));
 }
 
 fn segment_average(base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
@@ -31,12 +38,12 @@ fn segment_average(base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
     }
     let ja = min(u32(ua), n - 1u);
     if (ub <= f32(ja + 1u)) {
-        // Same bin: the exact average of a linear function, no division
+        // Same bin: the exact average of the bin's quadratic, no division
         // (this is Eq. 2's "|s_i − s_{i−1}| ≤ ε" branch, made exact).
-        return 0.5 * (lerp4(base, ua) + lerp4(base, ub));
+        return bin_average(base, ja, ua - f32(ja), min(ub - f32(ja), 1.0));
     }
     let jb = min(u32(ub), n);
-    var sum = (f32(ja + 1u) - ua) * 0.5 * (lerp4(base, ua) + table[base + ja + 1u]);
+    var sum = (f32(ja + 1u) - ua) * bin_average(base, ja, ua - f32(ja), 1.0);
     var lo = ja + 1u;
     if (prefix != 0u) {
         // Whole bins [ja+1, jb) by the running integral, an f32 pair per
@@ -60,7 +67,7 @@ fn segment_average(base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
         lo = lo + (1u << k);
     }
     if (jb < n) {
-        sum = sum + (ub - f32(jb)) * 0.5 * (table[base + jb] + lerp4(base, ub));
+        sum = sum + (ub - f32(jb)) * bin_average(base, jb, 0.0, ub - f32(jb));
     }
     return sum / (ub - ua);
 }

@@ -902,6 +902,7 @@ impl Raycaster {
             iso: s.iso,
             predict: s.predict,
             tf_offsets,
+            tf_mids: [tf.layout.mid_offset, 0, 0, 0],
         }
     }
 }

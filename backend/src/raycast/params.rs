@@ -51,6 +51,8 @@ pub struct GpuFrame {
     /// local window (data units), κ low, κ high (B10 §4).
     pub predict: [f32; 4],
     pub tf_offsets: [[u32; 4]; 8],
+    /// Offset of the bin midpoint values in a table part.
+    pub tf_mids: [u32; 4],
 }
 
 /// WGSL `ToolParams`: one tool's constant parameters (meaning per enhancer,

@@ -305,8 +305,27 @@ impl BrickPool {
             (bytemuck::cast_slice(&v).to_vec(), [0.0, 1.0])
         } else {
             let (lo, hi) = crate::store::codec::value_range(values);
-            let span = hi - lo;
+            // Integer bricks spanning at most the codes go on a grid of
+            // 1/2^k (code = (value − lo)·2^k, the finest that fits),
+            // losslessly, as the store does; the texture unit's filtered
+            // values then keep the finest steps the codes allow.
+            let unit = crate::store::codec::unit_step_fits(
+                values,
+                lo,
+                hi,
+                crate::store::BrickEncoding::U8Range,
+                has_nan,
+            );
             let top = if has_nan { 254.0 } else { 255.0 };
+            let span = if unit {
+                let mut grid = 1.0;
+                while (hi - lo) * grid * 2.0 <= top && grid < 128.0 {
+                    grid *= 2.0;
+                }
+                top / grid
+            } else {
+                hi - lo
+            };
             let q = values
                 .iter()
                 .map(|&v| {

@@ -175,7 +175,7 @@ impl Codec {
             1 => Compressor::Zstd(0),
             _ => return None,
         };
-        if tag & !(0x1f | NO_DATA_BIT) != 0 {
+        if tag & !(0x1f | NO_DATA_BIT | UNIT_STEP_BIT) != 0 {
             return None;
         }
         Some(Codec {
@@ -195,6 +195,32 @@ impl Codec {
 /// NaN as it is.
 const NO_DATA_BIT: u8 = 0x20;
 
+/// Tag bit of a quantised brick stored on the unit grid (format 3): its
+/// codes are value − min, step 1, not [min, max] cut into 255 (65535)
+/// steps. Chosen whenever every value is an integer and the brick spans at
+/// most the code range — the bricks of 8- and 16-bit sources at full
+/// detail mostly — which are then stored without any loss. (A range step
+/// of span/255 moves integer data by up to half a step: a quarter of a
+/// data value for a span of 128, enough to smear a transfer function peak
+/// one value wide.)
+const UNIT_STEP_BIT: u8 = 0x40;
+
+/// Whether a brick can be quantised on the unit grid: integer min and
+/// values, span within the codes (the top one kept for no data).
+pub fn unit_step_fits(
+    values: &[f32],
+    min: f32,
+    max: f32,
+    encoding: BrickEncoding,
+    no_data: bool,
+) -> bool {
+    let codes = encoding.steps() - if no_data { 1.0 } else { 0.0 };
+    encoding != BrickEncoding::F32
+        && min.fract() == 0.0
+        && (max as f64 - min as f64) <= codes
+        && values.iter().all(|v| v.is_nan() || v.fract() == 0.0)
+}
+
 /// Quantises (if the encoding says so) and compresses a brick whose values
 /// span [min, max] (NaN, "no data", aside). The result is what is stored on
 /// disk (format 2).
@@ -206,34 +232,40 @@ pub fn encode(
     codec: Codec,
 ) -> Vec<u8> {
     let no_data = encoding != BrickEncoding::F32 && values.iter().any(|v| v.is_nan());
+    let unit = unit_step_fits(values, min, max, encoding, no_data);
     let mut out = compress(
-        &quantise(values, min, max, encoding, no_data),
+        &quantise(values, min, max, encoding, no_data, unit),
         encoding,
         codec,
     );
     if no_data {
         out[0] |= NO_DATA_BIT;
     }
+    if unit {
+        out[0] |= UNIT_STEP_BIT;
+    }
     out
 }
 
 /// A brick's values as the bytes the encoding stores (little endian). With
-/// `no_data`, NaN takes the top code and values the codes below it.
+/// `no_data`, NaN takes the top code and values the codes below it; with
+/// `unit` the codes are value − min (see [`unit_step_fits`]).
 pub fn quantise(
     values: &[f32],
     min: f32,
     max: f32,
     encoding: BrickEncoding,
     no_data: bool,
+    unit: bool,
 ) -> Vec<u8> {
     match encoding {
         BrickEncoding::F32 => bytemuck::cast_slice::<f32, u8>(values).to_vec(),
         BrickEncoding::U8Range => {
-            let q = Quantiser::new(min, max, encoding, no_data);
+            let q = Quantiser::new(min, max, encoding, no_data, unit);
             values.iter().map(|&v| q.quantise(v) as u8).collect()
         }
         BrickEncoding::U16Range => {
-            let q = Quantiser::new(min, max, encoding, no_data);
+            let q = Quantiser::new(min, max, encoding, no_data, unit);
             values
                 .iter()
                 .flat_map(|&v| (q.quantise(v) as u16).to_le_bytes())
@@ -463,7 +495,8 @@ pub fn decode(
     }
     let raw = decompress(stored, encoding, len * bytes_per_value(encoding), framing)?;
     let no_data = framing == Framing::Tagged && stored[0] & NO_DATA_BIT != 0;
-    Ok(dequantise(&raw, min, max, encoding, no_data))
+    let unit = framing == Framing::Tagged && stored[0] & UNIT_STEP_BIT != 0;
+    Ok(dequantise(&raw, min, max, encoding, no_data, unit))
 }
 
 /// Quantised bytes back to data values (NaN for the no-data code).
@@ -473,8 +506,9 @@ pub fn dequantise(
     max: f32,
     encoding: BrickEncoding,
     no_data: bool,
+    unit: bool,
 ) -> Vec<f32> {
-    let q = Quantiser::new(min, max, encoding, no_data);
+    let q = Quantiser::new(min, max, encoding, no_data, unit);
     match encoding {
         BrickEncoding::F32 => raw
             .chunks_exact(4)
@@ -499,7 +533,7 @@ struct Quantiser {
 }
 
 impl Quantiser {
-    fn new(min: f32, max: f32, encoding: BrickEncoding, no_data: bool) -> Self {
+    fn new(min: f32, max: f32, encoding: BrickEncoding, no_data: bool, unit: bool) -> Self {
         let full = encoding.steps();
         let (steps, no_data) = if no_data && full > 0.0 {
             (full - 1.0, Some(full as u32))
@@ -509,7 +543,9 @@ impl Quantiser {
         let span = max as f64 - min as f64;
         Quantiser {
             min: min as f64,
-            step: if steps > 0.0 && span.is_finite() {
+            step: if unit {
+                1.0
+            } else if steps > 0.0 && span.is_finite() {
                 span / steps
             } else {
                 0.0
@@ -579,7 +615,14 @@ mod tests {
         let v = ramp();
         let (lo, hi) = value_range(&v);
         for enc in ENCODINGS {
-            let exact = quantise(&v, lo, hi, enc, false);
+            let exact = quantise(
+                &v,
+                lo,
+                hi,
+                enc,
+                false,
+                unit_step_fits(&v, lo, hi, enc, false),
+            );
             for codec in CODECS {
                 let s = encode(&v, lo, hi, enc, codec);
                 if codec.filter != Filter::Auto {
@@ -649,8 +692,14 @@ mod tests {
         // What the first release wrote: LZ4 with lz4_flex's size prefix.
         let v = ramp();
         let (lo, hi) = value_range(&v);
-        let old =
-            lz4_flex::compress_prepend_size(&quantise(&v, lo, hi, BrickEncoding::U8Range, false));
+        let old = lz4_flex::compress_prepend_size(&quantise(
+            &v,
+            lo,
+            hi,
+            BrickEncoding::U8Range,
+            false,
+            false,
+        ));
         let d = decode(
             &old,
             checksum(&old),
@@ -684,7 +733,7 @@ mod tests {
         for bad in ["", "zstd0", "zstd20", "gzip", "lz4+", "+delta", "zstd-1"] {
             assert_eq!(Codec::parse(bad), None, "{bad}");
         }
-        assert!(Codec::from_tag(0x02).is_none() && Codec::from_tag(0x40).is_none());
+        assert!(Codec::from_tag(0x02).is_none() && Codec::from_tag(0x80).is_none());
         assert!(Codec::from_tag(0x31).is_some(), "zstd, delta, no data");
     }
 
@@ -717,6 +766,37 @@ mod tests {
         // A brick without NaN keeps every code for values.
         let s = encode(&ramp(), lo, hi, BrickEncoding::U8Range, Codec::DEFAULT);
         assert_eq!(s[0] & NO_DATA_BIT, 0);
+    }
+
+    #[test]
+    fn integer_bricks_within_the_codes_are_lossless() {
+        // A CT brick of soft tissue: integers spanning 200 (8 bit) and
+        // 3000 (16 bit) values, with a no-data voxel.
+        for (enc, span) in [
+            (BrickEncoding::U8Range, 200.0),
+            (BrickEncoding::U16Range, 3000.0),
+        ] {
+            let mut v: Vec<f32> = (0..729)
+                .map(|i| -50.0 + ((i * 37) % 200) as f32 * span / 200.0)
+                .collect();
+            v[5] = f32::NAN;
+            let (lo, hi) = value_range(&v);
+            assert!(unit_step_fits(&v, lo, hi, enc, true));
+            let s = encode(&v, lo, hi, enc, Codec::DEFAULT);
+            assert_ne!(s[0] & UNIT_STEP_BIT, 0);
+            let d = decode(&s, checksum(&s), lo, hi, enc, v.len(), Framing::Tagged).unwrap();
+            for (a, b) in v.iter().zip(&d) {
+                assert!(a == b || (a.is_nan() && b.is_nan()), "{enc:?}: {a} → {b}");
+            }
+        }
+        // Not integers, or wider than the codes: the range step, no bit.
+        let half: Vec<f32> = (0..64).map(|i| i as f32 * 0.5).collect();
+        let wide: Vec<f32> = (0..64).map(|i| i as f32 * 5.0).collect();
+        for v in [half, wide] {
+            let (lo, hi) = value_range(&v);
+            let s = encode(&v, lo, hi, BrickEncoding::U8Range, Codec::DEFAULT);
+            assert_eq!(s[0] & UNIT_STEP_BIT, 0);
+        }
     }
 
     #[test]

@@ -22,8 +22,10 @@ use serde::{Deserialize, Serialize};
 pub const MAGIC: [u8; 8] = *b"PXOCTREE";
 pub const FOOTER_MAGIC: [u8; 8] = *b"PXOEND\0\0";
 /// The format written. Format 1 (LZ4 bricks without a codec tag) still reads;
-/// format 2 tags every brick with its codec.
-pub const VERSION: u32 = 2;
+/// format 2 tags every brick with its codec; format 3 adds the unit-step
+/// quantisation bit to the tag (lossless 8/16-bit integer bricks; older
+/// builds refuse the file by its version rather than misread a brick).
+pub const VERSION: u32 = 3;
 /// The oldest format read.
 pub const OLDEST_VERSION: u32 = 1;
 /// Bytes before the header: magic, version, header length, header CRC.

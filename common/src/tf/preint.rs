@@ -12,12 +12,20 @@
 //!
 //! Table coordinates: u = (s − vmin)/Δ with Δ = (vmax − vmin)/N, so node i is
 //! at u = i and every bin has width 1. Within a bin the table's f is the
-//! linear interpolant of the two node values; this is the transfer function
-//! as the renderer sees it. It equals the transfer function wherever τ, c, ι
-//! and ν are linear between nodes (control points on nodes), except that the
-//! emission k̃ = τ·c, quadratic within a bin where both τ and c vary, is
-//! linearised (error ≤ |τ′c′|·Δ²/4). Outside [vmin, vmax] f is constant
-//! (f(vmin) below, f(vmax) above).
+//! quadratic through the two node values and the value at the bin's
+//! midpoint; this is the transfer function as the renderer sees it. Between
+//! control points τ, c, ι and ν are linear and the emission k̃ = τ·c is
+//! quadratic, so in every bin without a control point inside it the table is
+//! the transfer function exactly — with integer data and integer control
+//! values (bin width 1) that is every bin. A bin with a control point
+//! strictly inside it keeps the linear interpolant of its two nodes (its
+//! midpoint entry is their mean), which can never be negative. Outside
+//! [vmin, vmax] f is constant (f(vmin) below, f(vmax) above).
+//!
+//! (A linear interpolant of k̃ alone, as tables of node values give, errs by
+//! up to |τ′c′|·Δ²/4 inside a bin: for a one-value-wide extinction peak of
+//! τ = 3 that is three quarters of the peak's emission, an error that no step
+//! size removes.)
 
 use anyhow::{bail, Result};
 
@@ -179,9 +187,26 @@ pub fn premultiplied_color(emission_avg: [f64; 3], tau_avg: f64, d: f64) -> [f64
 struct ChannelTable {
     /// f at the N+1 nodes.
     nodes: Vec<f64>,
+    /// f at the N bin midpoints (the mean of the two nodes where a control
+    /// point lies inside the bin).
+    mids: Vec<f64>,
     /// `levels[k][j]` = ∫ f du over bins [j·2^k, (j+1)·2^k) (u in bins, so
-    /// level 0 is the trapezoid (f_j + f_{j+1})/2); N >> k entries.
+    /// level 0 is Simpson's (f_j + 4·m_j + f_{j+1})/6, exact for the in-bin
+    /// quadratic); N >> k entries.
     levels: Vec<Vec<f64>>,
+}
+
+/// The average over [ta, tb] ⊆ [0, 1], ta ≤ tb, of the in-bin quadratic
+/// through the node values a (t = 0), b (t = 1) and the midpoint value m:
+/// f at the centre (Lagrange form, exactly a and b at the ends) plus
+/// f''·w²/24 with f'' = 4·(a + b − 2m). Exact; no division, so ta == tb
+/// gives f(ta). Never negative.
+#[inline]
+fn bin_average(a: f64, m: f64, b: f64, ta: f64, tb: f64) -> f64 {
+    let t = 0.5 * (ta + tb);
+    let w = tb - ta;
+    let f = a * (1.0 - t) * (1.0 - 2.0 * t) + 4.0 * m * t * (1.0 - t) + b * t * (2.0 * t - 1.0);
+    (f + (a + b - 2.0 * m) * (w * w / 6.0)).max(0.0)
 }
 
 /// How [`PreintTable::gpu_layout`] lays the table out in one `f32` array.
@@ -191,7 +216,8 @@ struct ChannelTable {
 /// N+1 node values come first (offset 0), then pyramid level k
 /// (k < `levels`) at `level_offsets[k]`, with `n_bins >> k` entries: entry j
 /// is ∫ f du over bins [j·2^k, (j+1)·2^k), in units of bins (multiply by
-/// `bin_width` for data units). Data value s maps to u = (s − vmin)/bin_width.
+/// `bin_width` for data units). The N bin midpoint values follow at
+/// `mid_offset`. Data value s maps to u = (s − vmin)/bin_width.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PreintLayout {
     pub n_bins: u32,
@@ -203,6 +229,8 @@ pub struct PreintLayout {
     pub channel_stride: u32,
     /// Offset of pyramid level k within a channel block (unused entries 0).
     pub level_offsets: [u32; MAX_LEVELS],
+    /// Offset of the N bin midpoint values within a channel block.
+    pub mid_offset: u32,
     pub vmin: f64,
     pub vmax: f64,
     pub bin_width: f64,
@@ -279,6 +307,7 @@ impl PreintTable {
         let mut channels: Vec<ChannelTable> = (0..Channel::COUNT)
             .map(|_| ChannelTable {
                 nodes: Vec::with_capacity(n_bins + 1),
+                mids: Vec::with_capacity(n_bins),
                 levels: Vec::new(),
             })
             .collect();
@@ -288,11 +317,42 @@ impl PreintTable {
                 channels[ch.index()].nodes.push(ch.of(&o));
             }
         }
+        // Bins with a control point strictly inside, and both bins beside a
+        // step on a node (the node holds only the step's upper value), stay
+        // linear.
+        let mut kinked = vec![false; n_bins];
+        let points = tf.points();
+        for (i, p) in points.iter().enumerate() {
+            let u = (p.value - vmin) / dx;
+            if !(u > -1.0 && u < n_bins as f64 + 1.0) {
+                continue;
+            }
+            let on_node = (u - u.round()).abs() <= 1e-9 * u.abs().max(1.0);
+            let step = points.get(i + 1).is_some_and(|q| q.value == p.value);
+            if !on_node {
+                if u > 0.0 && u < n_bins as f64 {
+                    kinked[u as usize] = true;
+                }
+            } else if step {
+                let k = u.round() as i64;
+                for j in [k - 1, k] {
+                    if (0..n_bins as i64).contains(&j) {
+                        kinked[j as usize] = true;
+                    }
+                }
+            }
+        }
+        for (j, &kink) in kinked.iter().enumerate() {
+            let o = (!kink).then(|| tf.eval(vmin + (j as f64 + 0.5) * dx));
+            for ch in Channel::ALL {
+                let t = &mut channels[ch.index()];
+                let linear = 0.5 * (t.nodes[j] + t.nodes[j + 1]);
+                t.mids.push(o.as_ref().map_or(linear, |o| ch.of(o)));
+            }
+        }
         for table in &mut channels {
-            let level0: Vec<f64> = table
-                .nodes
-                .windows(2)
-                .map(|w| 0.5 * (w[0] + w[1]))
+            let level0: Vec<f64> = (0..n_bins)
+                .map(|j| (table.nodes[j] + 4.0 * table.mids[j] + table.nodes[j + 1]) / 6.0)
                 .collect();
             table.levels.push(level0);
             loop {
@@ -344,11 +404,16 @@ impl PreintTable {
         (u as usize).min(self.n_bins - 1)
     }
 
-    /// f at u ∈ [0, N], linear within the bin.
+    /// f at u ∈ [0, N], the in-bin quadratic.
     fn f_u(&self, ch: &ChannelTable, u: f64) -> f64 {
         let j = self.bin_of(u);
         let t = (u - j as f64).clamp(0.0, 1.0);
-        (1.0 - t) * ch.nodes[j] + t * ch.nodes[j + 1]
+        self.bin_avg(ch, j, t, t)
+    }
+
+    /// Average of f over [j + ta, j + tb] within bin j.
+    fn bin_avg(&self, ch: &ChannelTable, j: usize, ta: f64, tb: f64) -> f64 {
+        bin_average(ch.nodes[j], ch.mids[j], ch.nodes[j + 1], ta, tb)
     }
 
     /// Σ of whole bins [lo, hi) from the pyramid: greedy aligned dyadic
@@ -371,18 +436,20 @@ impl PreintTable {
         sum
     }
 
-    /// ∫ f du over [ua, ub] ⊆ [0, N], ua ≤ ub: exact for the in-bin linear f.
+    /// ∫ f du over [ua, ub] ⊆ [0, N], ua ≤ ub: exact for the in-bin quadratic.
     fn integral_u(&self, ch: &ChannelTable, ua: f64, ub: f64) -> f64 {
         let ja = self.bin_of(ua);
         let first_end = ja + 1;
+        let ta = (ua - ja as f64).clamp(0.0, 1.0);
         if ub <= first_end as f64 {
-            return (ub - ua) * 0.5 * (self.f_u(ch, ua) + self.f_u(ch, ub));
+            return (ub - ua) * self.bin_avg(ch, ja, ta, (ub - ja as f64).clamp(0.0, 1.0));
         }
         let jb = (ub as usize).min(self.n_bins);
-        let mut sum = (first_end as f64 - ua) * 0.5 * (self.f_u(ch, ua) + ch.nodes[first_end]);
+        let mut sum = (first_end as f64 - ua) * self.bin_avg(ch, ja, ta, 1.0);
         sum += Self::sum_bins(ch, first_end, jb);
         if jb < self.n_bins {
-            sum += (ub - jb as f64) * 0.5 * (ch.nodes[jb] + self.f_u(ch, ub));
+            let tb = (ub - jb as f64).clamp(0.0, 1.0);
+            sum += (ub - jb as f64) * self.bin_avg(ch, jb, 0.0, tb);
         }
         sum
     }
@@ -445,8 +512,8 @@ impl PreintTable {
     /// difference F(s_i) − F(s_{i−1}) of its running integral is mostly
     /// rounding noise and dividing it by a tiny length amplifies the noise.
     /// Here no threshold is needed: when a and b lie in the same bin, f is
-    /// linear on [a, b] and the average is exactly (f(a) + f(b))/2, with no
-    /// division, however close a and b are (a == b gives f(a)). Otherwise the
+    /// quadratic on [a, b] and the average is exactly f((a+b)/2) + c₂w²/12,
+    /// with no division, however close a and b are (a == b gives f(a)). Otherwise the
     /// integral is a sum of non-negative terms with relative error of a few
     /// ulps, and b − a is at least the distance to a bin boundary on each
     /// side, so the quotient keeps full relative precision too.
@@ -461,7 +528,9 @@ impl PreintTable {
             return ch.nodes[self.n_bins];
         }
         if ua >= 0.0 && ub <= n && ub <= (self.bin_of(ua) + 1) as f64 {
-            return 0.5 * (self.f_u(ch, ua) + self.f_u(ch, ub));
+            let j = self.bin_of(ua);
+            let t = |u: f64| (u - j as f64).clamp(0.0, 1.0);
+            return self.bin_avg(ch, j, t(ua), t(ub));
         }
         // Here ua < ub, both finite (|u| ≤ 1e300), so the length is finite.
         let total = ub - ua;
@@ -520,7 +589,8 @@ impl PreintTable {
             *slot = offset as u32;
             offset += n >> k;
         }
-        let stride = offset;
+        let mid_offset = offset as u32;
+        let stride = offset + n;
         let mut data = Vec::with_capacity(stride * Channel::COUNT);
         let to_f32 = |x: f64| x.min(f32::MAX as f64) as f32;
         for ch in &self.channels {
@@ -528,6 +598,7 @@ impl PreintTable {
             for level in &ch.levels {
                 data.extend(level.iter().map(|&x| to_f32(x)));
             }
+            data.extend(ch.mids.iter().map(|&x| to_f32(x)));
         }
         debug_assert_eq!(data.len(), stride * Channel::COUNT);
         let layout = PreintLayout {
@@ -536,6 +607,7 @@ impl PreintTable {
             channels: Channel::COUNT as u32,
             channel_stride: stride as u32,
             level_offsets,
+            mid_offset,
             vmin: self.vmin,
             vmax: self.vmax,
             bin_width: self.dx,

@@ -730,17 +730,23 @@ fn gpu_average(data: &[f32], l: &PreintLayout, c: Channel, a: f64, b: f64) -> f6
     if ua > ub {
         std::mem::swap(&mut ua, &mut ub);
     }
-    let f = |u: f32| {
-        let j = (u as usize).min(n - 1);
-        let t = u - j as f32;
-        (1.0 - t) * nodes[j] + t * nodes[j + 1]
+    let mids = &data[base + l.mid_offset as usize..base + l.mid_offset as usize + n];
+    // shaders/shared/preint.wgsl `bin_average`
+    let bin = |j: usize, ta: f32, tb: f32| {
+        let (a, b, m) = (nodes[j], nodes[j + 1], mids[j]);
+        let t = 0.5 * (ta + tb);
+        let w = tb - ta;
+        let f = a * ((1.0 - t) * (1.0 - 2.0 * t))
+            + m * (4.0 * t * (1.0 - t))
+            + b * (t * (2.0 * t - 1.0));
+        (f + (a + b - 2.0 * m) * (w * w / 6.0)).max(0.0)
     };
     let ja = (ua as usize).min(n - 1);
     if ub <= (ja + 1) as f32 {
-        return (0.5 * (f(ua) + f(ub))) as f64;
+        return bin(ja, ua - ja as f32, (ub - ja as f32).min(1.0)) as f64;
     }
     let jb = (ub as usize).min(n);
-    let mut sum = ((ja + 1) as f32 - ua) * 0.5 * (f(ua) + nodes[ja + 1]);
+    let mut sum = ((ja + 1) as f32 - ua) * bin(ja, ua - ja as f32, 1.0);
     let mut lo = ja + 1;
     let top = l.levels as usize - 1;
     while lo < jb {
@@ -756,7 +762,7 @@ fn gpu_average(data: &[f32], l: &PreintLayout, c: Channel, a: f64, b: f64) -> f6
         lo += 1 << k;
     }
     if jb < n {
-        sum += (ub - jb as f32) * 0.5 * (nodes[jb] + f(ub));
+        sum += (ub - jb as f32) * bin(jb, 0.0, ub - jb as f32);
     }
     (sum / (ub - ua)) as f64
 }
@@ -769,8 +775,10 @@ fn gpu_layout_offsets_and_f32_lookup() {
     assert_eq!(layout.n_bins, 200);
     assert_eq!(layout.levels, 8); // 200, 100, 50, 25, 12, 6, 3, 1 entries
     assert_eq!(layout.channels, 6);
-    let stride = 201 + 200 + 100 + 50 + 25 + 12 + 6 + 3 + 1;
+    // nodes, the pyramid, the bin midpoints
+    let stride = 201 + 200 + 100 + 50 + 25 + 12 + 6 + 3 + 1 + 200;
     assert_eq!(layout.channel_stride as usize, stride);
+    assert_eq!(layout.mid_offset, 598);
     assert_eq!(data.len(), 6 * stride);
     assert_eq!(
         &layout.level_offsets[..8],
@@ -911,4 +919,77 @@ fn emptiness_matches_brute_force_on_a_grid() {
             }
         }
     }
+}
+
+// ------------------------------------------------- quadratic emission in bins
+
+/// Integer control values on a bin-width-1 table: every bin lies between
+/// two control points, so the table's f is the transfer function itself —
+/// the emission k̃ = τ·c, quadratic there, included — and segment averages
+/// match quadrature of the transfer function at any length. (A table of
+/// node values alone linearises k̃: for this one-value peak, τ = 3 from
+/// blue to white, its red emission average over the rising bin is 1.5
+/// instead of 1.)
+#[test]
+fn preint_emission_is_exact_between_integer_control_points() {
+    let tf = TransferFunction::from_points(vec![
+        ControlPoint::new(0.0, [0.0; 3], 0.0),
+        ControlPoint::new(150.0, [0.0, 0.0, 1.0], 0.0),
+        ControlPoint::new(151.0, [1.0, 1.0, 1.0], 3.0),
+        ControlPoint::new(152.0, [0.0, 0.0, 1.0], 0.0),
+        ControlPoint::new(200.0, [0.9, 0.5, 0.2], 1.0),
+        ControlPoint::new(200.0, [0.2, 0.5, 0.9], 4.0), // a step on a node
+        ControlPoint::new(255.0, [1.0; 3], 0.5),
+    ])
+    .unwrap();
+    let table = PreintTable::new(&tf, 0.0, 255.0, 255).unwrap();
+    let mut rng = Lcg(11);
+    for _ in 0..2000 {
+        let s = rng.range(0.0, 255.0);
+        let want = tf.eval(s);
+        for (c, w) in [
+            (Channel::Tau, want.tau),
+            (Channel::EmissionR, want.emission[0]),
+            (Channel::EmissionB, want.emission[2]),
+        ] {
+            let got = table.value(c, s);
+            // the bins beside the step stay linear (its upper value at the node)
+            if (199.0..201.0).contains(&s) {
+                assert!(got >= 0.0);
+                continue;
+            }
+            assert!((got - w).abs() < 1e-12, "{c:?} at {s}: {got} vs {w}");
+        }
+    }
+    // Averages over segments inside and across the peak against midpoint
+    // quadrature of the transfer function.
+    let quad = |c: Channel, a: f64, b: f64| {
+        let n = 20_000;
+        (0..n)
+            .map(|i| {
+                let o = tf.eval(a + (b - a) * (i as f64 + 0.5) / n as f64);
+                match c {
+                    Channel::Tau => o.tau,
+                    _ => o.emission[0],
+                }
+            })
+            .sum::<f64>()
+            / n as f64
+    };
+    for (a, b) in [
+        (150.0, 151.0),
+        (150.2, 150.7),
+        (149.5, 152.5),
+        (140.0, 160.3),
+    ] {
+        for c in [Channel::Tau, Channel::EmissionR] {
+            let got = table.average(c, a, b);
+            let want = quad(c, a, b);
+            assert!(
+                (got - want).abs() < 1e-7,
+                "{c:?} [{a}, {b}]: {got} vs {want}"
+            );
+        }
+    }
+    assert!((table.average(Channel::EmissionR, 150.0, 151.0) - 1.0).abs() < 1e-12);
 }
