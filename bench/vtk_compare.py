@@ -72,7 +72,7 @@ EYE = np.array([0.0, 0.0, 0.8])
 # CompositeColorAndCheckEarlyTermination): opacity 1 − 255/32768.
 VTK_EARLY_TERMINATION = 1.0 - 255.0 / 32768.0
 STEPS = [0.25, 0.5, 1.0]          # matched steps (mm): ours and VTK
-EXTRA_STEPS = [2.0]               # coarser, to find equal-error pairs
+EXTRA_STEPS = [2.0, 4.0]          # coarser, to find equal-error pairs
 STAGES = ["refine_ms", "upload_ms", "index_ms", "render_ms", "output_ms", "total_ms"]
 
 

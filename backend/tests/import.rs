@@ -392,3 +392,50 @@ fn format_one_files_still_read() {
         old.file_len()
     );
 }
+
+/// A `.pxo` of format 2 (tagged bricks, every 8-bit brick quantised in 255
+/// range steps; `v2-ml24.pxo`, the previous release's import of the 24³
+/// u8 Marschner–Lobb `ml24-u8.nrrd` with bricks of 8) still opens in this build, which writes format 3 (integer
+/// bricks on the unit grid): every brick decodes to within its quantisation
+/// bound of a fresh import, which itself is exact wherever the unit grid
+/// fits.
+#[test]
+fn format_two_files_still_read() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    let old = OctreeDb::open(&fixtures.join("v2-ml24.pxo")).unwrap();
+    assert_eq!(old.framing(), store::codec::Framing::Tagged);
+    let bytes = std::fs::read(fixtures.join("v2-ml24.pxo")).unwrap();
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("new.pxo");
+    let mut src = parallax_backend::data::open(&fixtures.join("ml24-u8.nrrd"), None).unwrap();
+    let opts = ImportOptions {
+        brick: 8,
+        ..Default::default()
+    };
+    store::import(src.as_mut(), &out, "ml24", &opts).unwrap();
+    let new = OctreeDb::open(&out).unwrap();
+    let written = std::fs::read(&out).unwrap();
+    assert_eq!(u32::from_le_bytes(written[8..12].try_into().unwrap()), 3);
+    assert_eq!(old.nodes.len(), new.nodes.len());
+    let (mut compared, mut moved) = (0, 0);
+    for n in &old.nodes {
+        let (Some(a), Some(b)) = (
+            old.read_brick(n.key).unwrap(),
+            new.read_brick(n.key).unwrap(),
+        ) else {
+            assert_eq!(n.is_stored(), new.node(n.key).unwrap().is_stored());
+            continue;
+        };
+        let bound = old.encoding().error_bound(n.min, n.max) + 1e-3;
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() as f64 <= bound, "brick {}: {x} vs {y}", n.key);
+        }
+        compared += 1;
+        moved += (a != b) as usize;
+    }
+    eprintln!("{compared} bricks compared, {moved} decode differently (now on the unit grid)");
+    assert!(compared > 8, "{compared} bricks compared");
+    assert!(moved > 0, "the unit grid changed some bricks");
+    assert!(new.summary.quant_max <= old.summary.quant_max);
+}
