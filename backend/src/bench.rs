@@ -384,21 +384,21 @@ pub fn run_kernels(
 }
 
 fn write_kernels_csv(path: &Path, points: &[KernelPoint]) -> Result<()> {
-    let mut f = AtomicFile::create(path)?;
-    writeln!(f, "kernel,frame_ms,render_ms,ratio_to_dvr,rmse_vs_dvr")?;
     let base = points.first().map_or(1.0, |p| p.render_ms);
-    for p in points {
-        writeln!(
-            f,
-            "{},{:.3},{:.3},{:.3},{:.6e}",
-            p.name,
-            p.frame_ms,
-            p.render_ms,
-            p.render_ms / base,
-            p.diff_from_dvr
-        )?;
-    }
-    f.commit()
+    write_table(
+        path,
+        "kernel,frame_ms,render_ms,ratio_to_dvr,rmse_vs_dvr",
+        points.iter().map(|p| {
+            format!(
+                "{},{:.3},{:.3},{:.3},{:.6e}",
+                p.name,
+                p.frame_ms,
+                p.render_ms,
+                p.render_ms / base,
+                p.diff_from_dvr
+            )
+        }),
+    )
 }
 
 /// The order at which each knob's error falls: the least-squares slope of
@@ -476,19 +476,24 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 fn write_csv(path: &Path, points: &[Point]) -> Result<()> {
-    let mut f = AtomicFile::create(path)?;
-    writeln!(
-        f,
-        "knob,value,bricks,frame_ms,render_ms,rmse,max_abs,psnr_db,bricks_in_cut"
-    )?;
-    for p in points {
-        writeln!(
-            f,
-            "{},{},{},{:.3},{:.3},{:.6e},{:.6e},{:.2},{}",
-            p.knob, p.value, p.bricks, p.frame_ms, p.render_ms, p.rmse, p.max_abs, p.psnr, p.leaves
-        )?;
-    }
-    f.commit()
+    write_table(
+        path,
+        "knob,value,bricks,frame_ms,render_ms,rmse,max_abs,psnr_db,bricks_in_cut",
+        points.iter().map(|p| {
+            format!(
+                "{},{},{},{:.3},{:.3},{:.6e},{:.6e},{:.2},{}",
+                p.knob,
+                p.value,
+                p.bricks,
+                p.frame_ms,
+                p.render_ms,
+                p.rmse,
+                p.max_abs,
+                p.psnr,
+                p.leaves
+            )
+        }),
+    )
 }
 
 /// Work–precision plot: RMSE (log) against frame time, one series per knob.
@@ -654,28 +659,25 @@ pub fn run_codecs(
             });
         }
     }
-    let mut f = AtomicFile::create(&out.join("codecs.csv"))?;
-    writeln!(
-        f,
-        "volume,codec,source_bytes,raw_brick_bytes,stored_bytes,ratio_to_source,ratio_to_raw,encode_mb_s,decode_mb_s,decode_in_mb_s"
+    write_table(
+        &out.join("codecs.csv"),
+        "volume,codec,source_bytes,raw_brick_bytes,stored_bytes,ratio_to_source,ratio_to_raw,encode_mb_s,decode_mb_s,decode_in_mb_s",
+        points.iter().map(|p| {
+            format!(
+                "{},{},{},{},{},{:.3},{:.3},{:.1},{:.1},{:.1}",
+                p.volume,
+                p.codec,
+                p.source_bytes,
+                p.raw_bytes,
+                p.stored_bytes,
+                p.source_bytes as f64 / p.stored_bytes as f64,
+                p.raw_bytes as f64 / p.stored_bytes as f64,
+                p.encode_mb_s,
+                p.decode_mb_s,
+                p.decode_in_mb_s
+            )
+        }),
     )?;
-    for p in &points {
-        writeln!(
-            f,
-            "{},{},{},{},{},{:.3},{:.3},{:.1},{:.1},{:.1}",
-            p.volume,
-            p.codec,
-            p.source_bytes,
-            p.raw_bytes,
-            p.stored_bytes,
-            p.source_bytes as f64 / p.stored_bytes as f64,
-            p.raw_bytes as f64 / p.stored_bytes as f64,
-            p.encode_mb_s,
-            p.decode_mb_s,
-            p.decode_in_mb_s
-        )?;
-    }
-    f.commit()?;
     Ok(points)
 }
 
@@ -743,16 +745,16 @@ pub fn run_reconstruction(
             psnr_db: image_error(&b.images[0], &reference).2,
         });
     }
-    let mut f = AtomicFile::create(&out.join("reconstruction.csv"))?;
-    writeln!(f, "frame,full_ms,reconstructed_ms,psnr_db")?;
-    for p in &points {
-        writeln!(
-            f,
-            "{},{:.3},{:.3},{:.2}",
-            p.frame, p.full_ms, p.reconstructed_ms, p.psnr_db
-        )?;
-    }
-    f.commit()?;
+    write_table(
+        &out.join("reconstruction.csv"),
+        "frame,full_ms,reconstructed_ms,psnr_db",
+        points.iter().map(|p| {
+            format!(
+                "{},{:.3},{:.3},{:.2}",
+                p.frame, p.full_ms, p.reconstructed_ms, p.psnr_db
+            )
+        }),
+    )?;
     Ok(points)
 }
 
@@ -843,27 +845,24 @@ pub fn run_prediction(
             });
         }
     }
-    let mut f = AtomicFile::create(&out.join("prediction.csv"))?;
-    writeln!(
-        f,
-        "kappa_low,kappa_high,frame,full_ms,predicted_ms,predicted,differing_fraction,identical,psnr_db"
+    write_table(
+        &out.join("prediction.csv"),
+        "kappa_low,kappa_high,frame,full_ms,predicted_ms,predicted,differing_fraction,identical,psnr_db",
+        points.iter().map(|p| {
+            format!(
+                "{},{},{},{:.3},{:.3},{},{:.6},{},{:.2}",
+                p.kappa[0],
+                p.kappa[1],
+                p.frame,
+                p.full_ms,
+                p.predicted_ms,
+                p.predicted,
+                p.differing,
+                p.identical,
+                p.psnr_db
+            )
+        }),
     )?;
-    for p in &points {
-        writeln!(
-            f,
-            "{},{},{},{:.3},{:.3},{},{:.6},{},{:.2}",
-            p.kappa[0],
-            p.kappa[1],
-            p.frame,
-            p.full_ms,
-            p.predicted_ms,
-            p.predicted,
-            p.differing,
-            p.identical,
-            p.psnr_db
-        )?;
-    }
-    f.commit()?;
     Ok(points)
 }
 
@@ -902,7 +901,7 @@ pub fn anisotropy_study(
     resolution: [u32; 2],
     size: f64,
 ) -> Result<Vec<AnisotropyPoint>> {
-    use crate::data::synth::shepp_logan;
+    use crate::data::synth::{coord, shepp_logan};
     use crate::volume::VoxelType;
     use parallax_common::tf::ControlPoint;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
@@ -929,7 +928,6 @@ pub fn anisotropy_study(
             [0.5, 0.5, 4.0],
         ),
     ] {
-        let coord = |i: usize, n: usize| -1.0 + (2 * i + 1) as f64 / n as f64;
         let vol = Volume::from_fn(dims, spacing, VoxelType::U16, |i, j, k| {
             (1000.0 * shepp_logan([coord(i, dims[0]), coord(j, dims[1]), coord(k, dims[2])]))
                 .round() as f32

@@ -358,23 +358,38 @@ fn single_voxel_and_thin_volumes_import() {
     }
 }
 
-/// A `.pxo` written by the first release (format 1: untagged LZ4 bricks)
-/// still opens, and every brick decodes to what a fresh import of the same
-/// NRRD (format 2, the default codec) holds.
-#[test]
-fn format_one_files_still_read() {
+/// The format version in a `.pxo` file's preamble.
+fn format_version(path: &Path) -> u32 {
+    let bytes = std::fs::read(path).unwrap();
+    u32::from_le_bytes(bytes[8..12].try_into().unwrap())
+}
+
+/// A database kept in `tests/fixtures` by an earlier release, and a fresh
+/// import (this build's format, the default codec) of the fixture volume it
+/// was made from, with bricks of `brick`.
+fn old_and_fresh(old: &str, source: &str, brick: usize) -> (OctreeDb, OctreeDb, tempfile::TempDir) {
     let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
-    let old = OctreeDb::open(&fixtures.join("v1-shells40.pxo")).unwrap();
-    assert_eq!(old.framing(), store::codec::Framing::Untagged);
+    let old = OctreeDb::open(&fixtures.join(old)).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("new.pxo");
-    let mut src = parallax_backend::data::open(&fixtures.join("shells40-u16.nrrd"), None).unwrap();
+    let mut src = parallax_backend::data::open(&fixtures.join(source), None).unwrap();
     let opts = ImportOptions {
-        brick: 16,
+        brick,
         ..Default::default()
     };
-    store::import(src.as_mut(), &out, "shells40", &opts).unwrap();
+    store::import(src.as_mut(), &out, source, &opts).unwrap();
+    assert_eq!(format_version(&out), store::format::VERSION);
     let new = OctreeDb::open(&out).unwrap();
+    (old, new, dir)
+}
+
+/// A `.pxo` written by the first release (format 1: untagged LZ4 bricks)
+/// still opens, and every brick decodes to what a fresh import of the same
+/// NRRD holds (none of this 16-bit volume's bricks fits the unit grid).
+#[test]
+fn format_one_files_still_read() {
+    let (old, new, _dir) = old_and_fresh("v1-shells40.pxo", "shells40-u16.nrrd", 16);
+    assert_eq!(old.framing(), store::codec::Framing::Untagged);
     assert_eq!(new.framing(), store::codec::Framing::Tagged);
     assert_eq!(old.nodes.len(), new.nodes.len());
     let mut compared = 0;
@@ -395,28 +410,16 @@ fn format_one_files_still_read() {
 
 /// A `.pxo` of format 2 (tagged bricks, every 8-bit brick quantised in 255
 /// range steps; `v2-ml24.pxo`, the previous release's import of the 24³
-/// u8 Marschner–Lobb `ml24-u8.nrrd` with bricks of 8) still opens in this build, which writes format 3 (integer
-/// bricks on the unit grid): every brick decodes to within its quantisation
-/// bound of a fresh import, which itself is exact wherever the unit grid
-/// fits.
+/// u8 Marschner–Lobb `ml24-u8.nrrd` with bricks of 8) still opens in this
+/// build, which writes format 3 (integer bricks on the unit grid): every
+/// brick decodes to within its quantisation bound of a fresh import, which
+/// itself is exact wherever the unit grid fits.
 #[test]
 fn format_two_files_still_read() {
-    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
-    let old = OctreeDb::open(&fixtures.join("v2-ml24.pxo")).unwrap();
+    let (old, new, _dir) = old_and_fresh("v2-ml24.pxo", "ml24-u8.nrrd", 8);
     assert_eq!(old.framing(), store::codec::Framing::Tagged);
-    let bytes = std::fs::read(fixtures.join("v2-ml24.pxo")).unwrap();
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("new.pxo");
-    let mut src = parallax_backend::data::open(&fixtures.join("ml24-u8.nrrd"), None).unwrap();
-    let opts = ImportOptions {
-        brick: 8,
-        ..Default::default()
-    };
-    store::import(src.as_mut(), &out, "ml24", &opts).unwrap();
-    let new = OctreeDb::open(&out).unwrap();
-    let written = std::fs::read(&out).unwrap();
-    assert_eq!(u32::from_le_bytes(written[8..12].try_into().unwrap()), 3);
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    assert_eq!(format_version(&fixtures.join("v2-ml24.pxo")), 2);
     assert_eq!(old.nodes.len(), new.nodes.len());
     let (mut compared, mut moved) = (0, 0);
     for n in &old.nodes {

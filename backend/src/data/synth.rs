@@ -68,7 +68,7 @@ impl SynthKind {
 
 /// Centre of voxel `i` of `n`, on [−1, 1].
 #[inline]
-fn coord(i: usize, n: usize) -> f64 {
+pub fn coord(i: usize, n: usize) -> f64 {
     -1.0 + (2 * i + 1) as f64 / n as f64
 }
 
