@@ -8,6 +8,10 @@
 // the leaf's brick at a step matched to its level (or skips it when it has no
 // data: empty under the transfer function, or dropped at import), leaves it
 // through a face, follows that face's neighbour pointer and descends again.
+// With MULTILEVEL, a leaf's samples blend in its parent's and grandparent's
+// data as far as the view's footprint allows (G10 §4, Fig. 5), so that a
+// cut that mixes levels shows no seams; TRICUBIC filters bricks with the
+// cubic B-spline (L12 §5.1).
 //
 // The shared modules in shaders/shared/ are pulled in by `#import` lines,
 // resolved by backend/src/raycast/shader.rs (each module once, in order).
@@ -105,6 +109,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let rt = mat3x3<f32>(frame.rt0.xyz, frame.rt1.xyz, frame.rt2.xyz);
     var o = rt * (origin - frame.center.xyz) * frame.center.w + 0.5 * frame.extent.xyz;
     var d = normalize(rt * dir_display);
+    if (MULTILEVEL) {
+        lod_k = frame.lod.x * view.region.z / f32(view.size.x) / max(abs(v.z), 1e-9);
+        lod_observer = rt * (v - frame.center.xyz) * frame.center.w + 0.5 * frame.extent.xyz;
+        lod_lf = frame.lod.w > 0.5 && eta != 0.0;
+    }
 
     var acc = Acc(vec3<f32>(0.0), 0.0, 0.0);
     var span = clip_box(o, d, frame.extent.xyz);
@@ -190,6 +199,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var bent = false;
         if (slot != NO_SLOT && t_exit > t) {
             let leaf = Leaf(node, level, cell, slot);
+            // Multilevel sampling blends in coarser levels only in leaves
+            // that the view needs coarser somewhere along the ray (the
+            // footprint grows monotonically along a ray from the observer;
+            // s(|z|) is convex along it): the others sample as usual and
+            // may skip their empty macrocells.
+            var lv = Levels(leaf, leaf, leaf);
+            var blend = false;
+            if (MULTILEVEL && !ISO) {
+                lv = levels_of(leaf, n);
+                blend = lv.up.slot != NO_SLOT
+                    && max(lod_offset(level, o + d * t), lod_offset(level, o + d * t_exit)) > 0.0;
+            }
             // Sampling rate matched to the leaf's level.
             let voxel = frame.spacing.w * f32(1u << (frame.counts.y - level));
             var h = step_factor * voxel;
@@ -204,7 +225,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slots[slot].range.z));
             }
             if (!have_prev) {
-                s_prev = sample_brick(leaf, o + d * t);
+                s_prev = sample_levels(lv, blend, o + d * t);
                 have_prev = true;
                 n_samples = n_samples + 1u;
             }
@@ -216,7 +237,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // looked up again only once the ray has left it).
             var t_cell = -1.0;
             loop {
-                if (MACROCELLS && tc >= t_cell) {
+                if (MACROCELLS && !blend && tc >= t_cell) {
                     // Every segment inside an empty cell adds exactly
                     // nothing: go to its last sample there.
                     let mc = macrocell(leaf, o, d, inv_d, t, h, tc, t_exit);
@@ -224,7 +245,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if (mc.y >= f32(k)) {
                         let kn = u32(mc.y);
                         tc = t + f32(kn) * h;
-                        s_prev = sample_brick(leaf, o + d * tc);
+                        s_prev = sample_levels(lv, blend, o + d * tc);
                         n_samples = n_samples + 1u;
                         k = kn + 1u;
                         if (tc >= t_exit) {
@@ -240,7 +261,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (tn >= tk) {
                     k = k + 1u;
                 }
-                let s = sample_brick(leaf, o + d * tn);
+                let s = sample_levels(lv, blend, o + d * tn);
                 n_samples = n_samples + 1u;
                 if (ISO) {
                     // The first crossing of the isovalue, opaque and shaded;
@@ -312,7 +333,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     smp.refraction = aux.y;
                 }
                 if (NEEDS_GRADIENT) {
-                    smp.gradient = gradient(leaf, smp.pos);
+                    smp.gradient = gradient_levels(lv, blend, smp.pos);
                 }
                 chain_sample(&smp);
                 var shade = 1.0;
@@ -320,7 +341,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (SHADING && (smp.tau > 0.0 || smp.alpha_mix > 0.0)) {
                     var g = smp.gradient;
                     if (!NEEDS_GRADIENT) {
-                        g = gradient(leaf, smp.pos);
+                        g = gradient_levels(lv, blend, smp.pos);
                     }
                     let gl = length(g);
                     if (gl > 1e-6) {

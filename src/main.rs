@@ -204,6 +204,11 @@ enum Command {
         /// (DIR/anisotropy.csv).
         #[arg(long)]
         anisotropy: bool,
+        /// Only the steps at level changes between bricks, one level of
+        /// detail per brick against multilevel sampling (DIR/seams.csv and
+        /// the images).
+        #[arg(long)]
+        seams: bool,
         /// The interaction script --reconstruction and --prediction run
         /// (its first N frames).
         #[arg(long, default_value = "configs/scripts/rotate-1deg.toml")]
@@ -489,7 +494,13 @@ fn run(cli: Cli) -> Result<()> {
             isovalue,
             script,
             anisotropy,
+            seams,
         } => {
+            if seams {
+                parallax_backend::bench::run_seams(&out)?;
+                println!("wrote {}/seams.csv", out.display());
+                return Ok(());
+            }
             if anisotropy {
                 parallax_backend::bench::run_anisotropy(&out)?;
                 println!("wrote {}/anisotropy.csv", out.display());

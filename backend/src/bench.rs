@@ -138,6 +138,32 @@ pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
             },
         ));
     }
+    // Multilevel sampling (G10 §4): the accuracy sweep with levels blended.
+    for a in [0.5, 1.0, 2.0, 4.0] {
+        sweeps.push((
+            "multilevel",
+            a,
+            "full",
+            RenderConfig {
+                accuracy: a,
+                multilevel: true,
+                ..base.clone()
+            },
+        ));
+    }
+    // Tricubic B-spline filtering (L12 §5.1): the step sweep.
+    for s in [0.125, 0.25, 0.5, 1.0] {
+        sweeps.push((
+            "tricubic",
+            s,
+            "full",
+            RenderConfig {
+                step_factor: s,
+                filter: parallax_common::config::Filter::Tricubic,
+                ..base.clone()
+            },
+        ));
+    }
     // The old curve: no empty-space skipping inside bricks.
     for s in [0.125, 0.25, 0.5, 1.0] {
         sweeps.push((
@@ -526,6 +552,8 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
             RGBColor(120, 120, 120),
         ),
         ("adaptive_step", "full", RGBColor(230, 140, 0)),
+        ("multilevel", "full", RGBColor(0, 160, 160)),
+        ("tricubic", "full", RGBColor(140, 70, 20)),
         ("accuracy", "full", BLUE),
         ("early_termination", "full", GREEN),
         ("step_factor", "8-bit", MAGENTA),
@@ -954,12 +982,7 @@ pub fn anisotropy_study(
                 interpolation: parallax_common::config::Interpolation::Exact,
                 ..precise_config()
             };
-            let mut r = Renderer::new(&db, &cfg)?;
-            r.set_transfer_function(1, &tf)?;
-            r.converge(&placement, &[view], &cfg, 64)?;
-            let t = Instant::now();
-            let f = r.frame(100, &placement, &[view], &cfg)?;
-            let frame_ms = t.elapsed().as_secs_f64() * 1e3;
+            let (f, frame_ms) = converged_frame(&db, &tf, &placement, &view, &cfg)?;
             let (rmse, max_abs, _) = image_error(&f.images[0], &reference);
             let p = AnisotropyPoint {
                 volume: name,
@@ -1001,5 +1024,209 @@ pub fn anisotropy_study(
         "anisotropic / isotropic error at the default accuracy: {:.2}",
         at_default("0.5 x 0.5 x 4 mm slices") / at_default("isotropic 1 mm")
     );
+    Ok(points)
+}
+
+/// A frame of `view` once the cut has converged, and its wall time (ms).
+fn converged_frame(
+    db: &Path,
+    tf: &TransferFunction,
+    placement: &Placement,
+    view: &View,
+    cfg: &RenderConfig,
+) -> Result<(crate::render::Frame, f64)> {
+    let mut r = Renderer::new(db, cfg)?;
+    r.set_transfer_function(1, tf)?;
+    r.converge(placement, &[*view], cfg, 64)?;
+    let t = Instant::now();
+    let f = r.frame(100, placement, &[*view], cfg)?;
+    Ok((f, t.elapsed().as_secs_f64() * 1e3))
+}
+
+/// One accuracy of [`seam_study`]: one level of detail per brick against
+/// multilevel sampling.
+#[derive(Clone, Debug)]
+pub struct SeamPoint {
+    pub accuracy: f64,
+    /// Neighbouring pixel pairs that straddle a level change: one ray met
+    /// only full-detail bricks (its pixel is within 1e-4 of the full-detail
+    /// image's), the other a coarser one.
+    pub seam_pairs: usize,
+    /// The largest amount by which a step across those pairs exceeds the
+    /// same step in the full-detail image, one level per brick (the seam)
+    /// and with multilevel sampling (blurring adds nothing).
+    pub jump_before: f64,
+    pub jump_after: f64,
+    /// RMSE against the exact integral, before and after.
+    pub rmse_before: f64,
+    pub rmse_after: f64,
+    pub bricks: u64,
+    pub ms_before: f64,
+    pub ms_after: f64,
+}
+
+/// `parallax bench --seams`: a thin slab of a smooth field seen face-on
+/// from close by, so that the cut holds finer bricks at the centre than at
+/// the edges, rendered with one level of detail per brick and with
+/// multilevel sampling (G10 §4, Fig. 5). Writes `seams.csv` and the images.
+pub fn run_seams(out: &Path) -> Result<Vec<SeamPoint>> {
+    seam_study(out, 128, [384, 288])
+}
+
+/// [`run_seams`] on an n × n × n/8 slab at `resolution` (n / width fixed
+/// at 2/3 keeps the levels where they are: a leaf voxel about a pixel at
+/// the centre, two at the corners).
+pub fn seam_study(out: &Path, n: usize, resolution: [u32; 2]) -> Result<Vec<SeamPoint>> {
+    use crate::volume::VoxelType;
+    use parallax_common::tf::ControlPoint;
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    // Waves 8 voxels long: the first coarser level keeps a third of them.
+    let wave = |i: usize| (std::f64::consts::TAU * (i as f64 + 0.5) / 8.0).sin();
+    let vol = Volume::from_fn([n, n, n / 8], [1.0; 3], VoxelType::F32, |i, j, _| {
+        (0.5 + 0.4 * wave(i) * wave(j)) as f32
+    });
+    // Opaque: each pixel shows the value where its ray meets the slab, so
+    // a level change between bricks shows as a step (G10 Fig. 5).
+    let tf = TransferFunction::from_points(vec![
+        ControlPoint::new(0.0, [0.1, 0.3, 0.9], 20.0),
+        ControlPoint::new(1.0, [1.0, 0.8, 0.3], 20.0),
+    ])?;
+    let placement = Placement {
+        center: [0.0, 0.0, 0.0],
+        rotation_deg: [-45.0, 0.0, 0.0],
+        size: 0.3,
+    };
+    let view = View::window(resolution, [0.4, 0.3], [0.0, 0.0, 0.25]);
+    let reference = reference::render(&vol, &tf, &placement, &view, Tolerance { abs: 1e-6 });
+    let tmp = tempfile::tempdir()?;
+    let db = tmp.path().join("seams.pxo");
+    store::import(
+        &mut MemorySource::new(&vol),
+        &db,
+        "slab of waves",
+        &ImportOptions {
+            brick: 16,
+            encoding: BrickEncoding::F32,
+            ..Default::default()
+        },
+    )?;
+    let render = |accuracy: f64, multilevel: bool| -> Result<(Vec<[f32; 4]>, u64, f64)> {
+        let cfg = RenderConfig {
+            accuracy,
+            multilevel,
+            interpolation: parallax_common::config::Interpolation::Exact,
+            ..precise_config()
+        };
+        let (f, ms) = converged_frame(&db, &tf, &placement, &view, &cfg)?;
+        Ok((f.images[0].clone(), f.stats.cut_leaves_with_data, ms))
+    };
+    let (full, _, _) = render(0.01, false)?;
+    let w = resolution[0] as usize;
+    let diff = |img: &[[f32; 4]]| -> Vec<[f64; 4]> {
+        img.iter()
+            .zip(&full)
+            .map(|(a, b)| std::array::from_fn(|c| a[c] as f64 - b[c] as f64))
+            .collect()
+    };
+    // Pixels whose 5 × 5 neighbourhood lies inside the volume's image: at
+    // the silhouette the rays leave through the sides, which is no seam.
+    let h = resolution[1] as usize;
+    let interior: Vec<bool> = (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            (y - 2..=y + 2).all(|v| {
+                (x - 2..=x + 2).all(|u| {
+                    (0..w as i64).contains(&u)
+                        && (0..h as i64).contains(&v)
+                        && full[v as usize * w + u as usize][3] > 1e-3
+                })
+            })
+        })
+        .collect();
+    let mut points = Vec::new();
+    for accuracy in [4.0, 8.0] {
+        let (before, bricks, ms_before) = render(accuracy, false)?;
+        let (after, _, ms_after) = render(accuracy, true)?;
+        let e0 = diff(&before);
+        // A ray that met full-detail bricks only (or that a coarse brick
+        // changed by less than 1e-4) against one that a coarse one changed.
+        let exact = |i: usize| e0[i].iter().all(|&v| v.abs() < 1e-4);
+        // How much larger a step between two pixels is than the same step in
+        // the full-detail image: a seam adds to it, blurring does not.
+        let step = |img: &[[f32; 4]], i: usize, j: usize| {
+            (0..4)
+                .map(|c| {
+                    let d = (img[j][c] - img[i][c]).abs() - (full[j][c] - full[i][c]).abs();
+                    d as f64
+                })
+                .fold(0.0, f64::max)
+        };
+        let (mut pairs, mut jump_before, mut jump_after) = (0, 0f64, 0f64);
+        for i in 0..e0.len() {
+            for j in [i + 1, i + w] {
+                if (j == i + 1 && j % w == 0)
+                    || j >= e0.len()
+                    || !interior[i]
+                    || !interior[j]
+                    || exact(i) == exact(j)
+                {
+                    continue;
+                }
+                pairs += 1;
+                jump_before = jump_before.max(step(&before, i, j));
+                jump_after = jump_after.max(step(&after, i, j));
+            }
+        }
+        for (name, img) in [("one-level", &before), ("multilevel", &after)] {
+            crate::output::write_png(
+                &out.join(format!("seams-accuracy{accuracy}-{name}.png")),
+                resolution[0],
+                resolution[1],
+                img,
+            )?;
+        }
+        let p = SeamPoint {
+            accuracy,
+            seam_pairs: pairs,
+            jump_before,
+            jump_after,
+            rmse_before: image_error(&before, &reference).0,
+            rmse_after: image_error(&after, &reference).0,
+            bricks,
+            ms_before,
+            ms_after,
+        };
+        eprintln!(
+            "accuracy {accuracy}: {} bricks, {pairs} pixel pairs across level changes; largest \
+             step there {:.2e} with one level per brick, {:.2e} with multilevel sampling; RMSE \
+             {:.2e} → {:.2e}; {:.0} → {:.0} ms",
+            p.bricks,
+            p.jump_before,
+            p.jump_after,
+            p.rmse_before,
+            p.rmse_after,
+            p.ms_before,
+            p.ms_after
+        );
+        points.push(p);
+    }
+    write_table(
+        &out.join("seams.csv"),
+        "accuracy,bricks_in_cut,seam_pixel_pairs,jump_one_level,jump_multilevel,rmse_one_level,rmse_multilevel,ms_one_level,ms_multilevel",
+        points.iter().map(|p| {
+            format!(
+                "{},{},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.1},{:.1}",
+                p.accuracy,
+                p.bricks,
+                p.seam_pairs,
+                p.jump_before,
+                p.jump_after,
+                p.rmse_before,
+                p.rmse_after,
+                p.ms_before,
+                p.ms_after
+            )
+        }),
+    )?;
     Ok(points)
 }

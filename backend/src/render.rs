@@ -6,14 +6,14 @@ use crate::gpu::Gpu;
 use crate::index::SpatialIndex;
 use crate::loader::{Loader, LoaderConfig};
 use crate::raycast::{
-    BrickPool, Filtering, KernelKey, Raycaster, RenderInputs, RenderSettings, SceneGeometry,
-    TfTable, ToolParams,
+    BrickPool, Filtering, KernelKey, Multilevel, Raycaster, RenderInputs, RenderSettings,
+    SceneGeometry, TfTable, ToolParams,
 };
 use crate::reconstruct::{subframe_of, ViewHistory, SUBFRAMES};
 use crate::store::{BrickEncoding, NodeKey, OctreeDb};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{Interpolation, Mode, RenderConfig, Shading};
+use parallax_common::config::{Filter, Interpolation, Mode, RenderConfig, Shading};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::tools::{Tool, MAX_ENHANCERS};
@@ -321,6 +321,16 @@ impl Renderer {
             macrocells: cfg.macrocells,
             count_samples: self.count_samples,
             adaptive_step: cfg.adaptive_step,
+            multilevel: cfg.multilevel.then(|| Multilevel {
+                accuracy: cfg.accuracy as f32,
+                lightfield: self.loader.lightfield().map(|lf| {
+                    (
+                        lf.pixel_size as f32,
+                        (lf.angular_accuracy_deg.to_radians() / 2.0).tan() as f32,
+                    )
+                }),
+            }),
+            tricubic: cfg.filter == Filter::Tricubic,
         }
     }
 

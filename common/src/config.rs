@@ -114,6 +114,27 @@ pub struct RenderConfig {
     /// λ = t·sin(θ/2), Eq. 3) instead of `step_factor` × the leaf's voxel.
     #[serde(default)]
     pub adaptive_step: bool,
+    /// Multilevel sampling (G10 §4, Fig. 5): samples blend a leaf's data
+    /// with its parent's and grandparent's by how coarse the view needs
+    /// them (the footprint refinement uses, with `accuracy`), so where the
+    /// cut changes level between bricks the image has no seam.
+    #[serde(default)]
+    pub multilevel: bool,
+    /// The reconstruction filter inside bricks: trilinear, or the smoother
+    /// tricubic B-spline of L12 §5.1 (eight trilinear lookups a sample).
+    #[serde(default = "trilinear")]
+    pub filter: Filter,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Filter {
+    Trilinear,
+    Tricubic,
+}
+
+fn trilinear() -> Filter {
+    Filter::Trilinear
 }
 
 /// B10 found κ = 0.1…0.3 (steps of 3–10 voxels) good on its data; on the

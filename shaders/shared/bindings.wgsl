@@ -43,6 +43,7 @@ struct GpuFrame {
     predict: vec4<f32>,   // prediction buffer: mode (0 off, 1 full traversal, 2 predicted), local window (data units), κ low, κ high
     tf_offsets: array<vec4<u32>, 8>,  // pyramid level offsets (32)
     tf_mids: vec4<u32>,   // offset of the bin midpoint values in a table part, 0, 0, 0
+    lod: vec4<f32>,       // multilevel sampling: accuracy (pixels per voxel), light field s0 (m), tan(Φ/2), light field (1) or not (0)
 }
 
 // A tool's constant parameters (their meaning is the enhancer's: see

@@ -5,6 +5,8 @@
 // Trilinear filtering by the texture unit (one sample) instead of eight
 // loads; off where the pool's format is not filterable on this device.
 override HW_FILTER: bool = false;
+// Tricubic B-spline filtering instead of trilinear (L12 §5.1).
+override TRICUBIC: bool = false;
 
 // The volume has no-data voxels (NaN at import, `--nan empty`): they are
 // left out of the interpolation, the other taps' weights renormalised; a
@@ -39,6 +41,50 @@ fn tap(o: vec3<i32>, i: vec3<i32>) -> f32 {
     return textureLoad(pool, o + i, 0).r;
 }
 
+// Trilinear interpolation at `local` (tap units: tap i at i) in the slot at
+// `o`: by the texture unit, or by eight loads with exact f32 weights.
+fn trilinear(o: vec3<i32>, local: vec3<f32>) -> f32 {
+    if (HW_FILTER) {
+        let size = vec3<f32>(frame.pool.xyz * frame.pool.w);
+        return textureSampleLevel(pool, pool_sampler, (vec3<f32>(o) + local + 0.5) / size, 0.0).r;
+    }
+    let f0 = floor(local);
+    let w = local - f0;
+    let i0 = vec3<i32>(f0);
+    let i1 = min(i0 + vec3<i32>(1), vec3<i32>(i32(frame.pool.w) - 1));
+    let c00 = mix(tap(o, i0), tap(o, vec3<i32>(i1.x, i0.y, i0.z)), w.x);
+    let c10 = mix(tap(o, vec3<i32>(i0.x, i1.y, i0.z)), tap(o, vec3<i32>(i1.x, i1.y, i0.z)), w.x);
+    let c01 = mix(tap(o, vec3<i32>(i0.x, i0.y, i1.z)), tap(o, vec3<i32>(i1.x, i0.y, i1.z)), w.x);
+    let c11 = mix(tap(o, vec3<i32>(i0.x, i1.y, i1.z)), tap(o, i1), w.x);
+    return mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+}
+
+// Tricubic B-spline filtering (L12 §5.1, after Sigg and Hadwiger, "Fast
+// third-order texture filtering", GPU Gems 2 ch. 20): the 4³ taps around
+// `local` weighted by the cubic B-spline, gathered as eight trilinear
+// lookups at h0 = i − 1 + w1/(w0 + w1) and h1 = i + 1 + w3/(w2 + w3) per
+// axis. The brick's overlap of 2 keeps every tap inside the slot.
+fn tricubic(o: vec3<i32>, x: vec3<f32>) -> f32 {
+    let local = clamp(x, vec3<f32>(1.0), vec3<f32>(f32(frame.pool.w) - 2.0));
+    let i = floor(local);
+    let f = local - i;
+    let f2 = f * f;
+    let f3 = f2 * f;
+    let w0 = (1.0 - 3.0 * f + 3.0 * f2 - f3) / 6.0;
+    let w1 = (4.0 - 6.0 * f2 + 3.0 * f3) / 6.0;
+    let w2 = (1.0 + 3.0 * f + 3.0 * f2 - 3.0 * f3) / 6.0;
+    let w3 = f3 / 6.0;
+    let g0 = w0 + w1;
+    let g1 = w2 + w3;
+    let h0 = i - 1.0 + w1 / g0;
+    let h1 = i + 1.0 + w3 / g1;
+    let a = mix(trilinear(o, h1), trilinear(o, vec3<f32>(h0.x, h1.y, h1.z)), g0.x);
+    let b = mix(trilinear(o, vec3<f32>(h1.x, h0.y, h1.z)), trilinear(o, vec3<f32>(h0.x, h0.y, h1.z)), g0.x);
+    let c = mix(trilinear(o, vec3<f32>(h1.x, h1.y, h0.z)), trilinear(o, vec3<f32>(h0.x, h1.y, h0.z)), g0.x);
+    let e = mix(trilinear(o, vec3<f32>(h1.x, h0.y, h0.z)), trilinear(o, h0), g0.x);
+    return mix(mix(a, b, g0.y), mix(c, e, g0.y), g0.z);
+}
+
 fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
     let scale = f32(1u << (frame.counts.y - leaf.level));
     let voxel = frame.spacing.xyz * scale;
@@ -68,19 +114,10 @@ fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
             return NO_SAMPLE;
         }
         v = sum / wsum;
-    } else if (HW_FILTER) {
-        let size = vec3<f32>(frame.pool.xyz * frame.pool.w);
-        v = textureSampleLevel(pool, pool_sampler, (vec3<f32>(o) + local + 0.5) / size, 0.0).r;
+    } else if (TRICUBIC) {
+        v = tricubic(o, local);
     } else {
-        let f0 = floor(local);
-        let w = local - f0;
-        let i0 = vec3<i32>(f0);
-        let i1 = min(i0 + vec3<i32>(1), vec3<i32>(i32(frame.pool.w) - 1));
-        let c00 = mix(tap(o, i0), tap(o, vec3<i32>(i1.x, i0.y, i0.z)), w.x);
-        let c10 = mix(tap(o, vec3<i32>(i0.x, i1.y, i0.z)), tap(o, vec3<i32>(i1.x, i1.y, i0.z)), w.x);
-        let c01 = mix(tap(o, vec3<i32>(i0.x, i0.y, i1.z)), tap(o, vec3<i32>(i1.x, i0.y, i1.z)), w.x);
-        let c11 = mix(tap(o, vec3<i32>(i0.x, i1.y, i1.z)), tap(o, i1), w.x);
-        v = mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+        v = trilinear(o, local);
     }
     let r = slots[leaf.slot].range;
     return r.x + r.y * v;
@@ -119,4 +156,124 @@ fn gradient(leaf: Leaf, p: vec3<f32>) -> vec3<f32> {
     let gy = sample_brick(leaf, p + vec3<f32>(0.0, h.y, 0.0)) - sample_brick(leaf, p - vec3<f32>(0.0, h.y, 0.0));
     let gz = sample_brick(leaf, p + vec3<f32>(0.0, 0.0, h.z)) - sample_brick(leaf, p - vec3<f32>(0.0, 0.0, h.z));
     return vec3<f32>(gx / h.x, gy / h.y, gz / h.z) * 0.5;
+}
+
+// Multilevel sampling (G10 §4 and Fig. 5; GigaVoxels' quadrilinear
+// filtering): a leaf's samples blend its data with its parent's and its
+// grandparent's by how much coarser than the leaf the view needs the point
+// to be, so that where the cut changes level between bricks both sides
+// sample the same blend of levels and the image has no seam.
+override MULTILEVEL: bool = false;
+
+// The levels a leaf's samples may read: the leaf, its parent and its
+// grandparent (`slot` NO_SLOT where absent or without data).
+struct Levels {
+    leaf: Leaf,
+    up: Leaf,
+    up2: Leaf,
+}
+
+// Per ray: accuracy × the view's pixel angle (pixel width / |V_z|), the
+// observer in volume space, and whether the view's detail follows the light
+// field display's s(z).
+var<private> lod_k: f32;
+var<private> lod_observer: vec3<f32>;
+var<private> lod_lf: bool;
+
+fn levels_of(leaf: Leaf, n: IndexNode) -> Levels {
+    var lv = Levels(leaf, leaf, leaf);
+    lv.up.slot = NO_SLOT;
+    lv.up2.slot = NO_SLOT;
+    let pi = n.tree & 0xFFFFu;
+    if (pi == NONE16) {
+        return lv;
+    }
+    let pn = index[pi];
+    lv.up = Leaf(pi, leaf.level - 1u, floor(leaf.cell * 0.5), pn.data & NO_SLOT);
+    let gi = pn.tree & 0xFFFFu;
+    if (lv.up.slot == NO_SLOT || gi == NONE16) {
+        return lv;
+    }
+    lv.up2 = Leaf(gi, leaf.level - 2u, floor(leaf.cell * 0.25), index[gi].data & NO_SLOT);
+    return lv;
+}
+
+// The voxel length refinement sizes a level by (backend/src/loader/
+// geometry.rs `voxel_len`): the finest edge at the leaves, the longest above.
+fn level_voxel(level: u32) -> f32 {
+    if (level >= frame.counts.y) {
+        return frame.spacing.w;
+    }
+    let s = frame.spacing.xyz;
+    return f32(1u << (frame.counts.y - level)) * max(max(s.x, s.y), s.z);
+}
+
+// How many levels coarser than `level` the view needs the point p: log2 of
+// accuracy × footprint / voxel. The footprint is a pixel's back-projection
+// to p, pixel·Δz²/(D·|VP|) (L12 §4.2.1 for a small sphere: the distance
+// and the magnification 1/cos²β off the axis; D = |V_z|, Δz the depth of p
+// from the observer), or the display's s(z) = s0 + 2|z|·tan(Φ/2) at p's
+// depth for light field views (G10 §4). A leaf is adequate where this is
+// ≥ 0; refinement keeps every leaf adequate at its corners and closest
+// point (backend/src/loader/geometry.rs `point_pixels`), so on a face
+// between a coarse and a finer leaf the value is ≤ 0 for the coarse one and
+// both sides blend the same levels.
+fn lod_offset(level: u32, p: vec3<f32>) -> f32 {
+    let voxel = level_voxel(level);
+    if (lod_lf) {
+        let z = dot(frame.rt2.xyz, p - 0.5 * frame.extent.xyz) / frame.center.w + frame.center.z;
+        let s = frame.lod.y + 2.0 * abs(z) * frame.lod.z;
+        return log2(frame.lod.x * s * frame.center.w / voxel);
+    }
+    let rel = p - lod_observer;
+    let dz = abs(dot(rel, frame.rt2.xyz));
+    return log2(lod_k * dz * dz / (max(length(rel), 1e-30) * voxel));
+}
+
+// lod_offset clamped to the levels at hand: 0 to 1 blends leaf to parent,
+// 1 to 2 parent to grandparent.
+fn level_blend(lv: Levels, p: vec3<f32>) -> f32 {
+    let top = select(1.0, 2.0, lv.up2.slot != NO_SLOT);
+    return clamp(lod_offset(lv.leaf.level, p), 0.0, top);
+}
+
+// The sample at p: the leaf's alone, or blended with the coarser levels.
+fn sample_levels(lv: Levels, blend: bool, p: vec3<f32>) -> f32 {
+    let s0 = sample_brick(lv.leaf, p);
+    if (!MULTILEVEL || !blend) {
+        return s0;
+    }
+    let c = level_blend(lv, p);
+    if (c <= 0.0) {
+        return s0;
+    }
+    let s1 = sample_brick(lv.up, p);
+    if (!has_data(s0) || !has_data(s1)) {
+        return s0;
+    }
+    if (c <= 1.0) {
+        return mix(s0, s1, c);
+    }
+    let s2 = sample_brick(lv.up2, p);
+    if (!has_data(s2)) {
+        return s1;
+    }
+    return mix(s1, s2, c - 1.0);
+}
+
+// The gradient at p, blended across levels like the samples (G10 §4).
+fn gradient_levels(lv: Levels, blend: bool, p: vec3<f32>) -> vec3<f32> {
+    let g0 = gradient(lv.leaf, p);
+    if (!MULTILEVEL || !blend) {
+        return g0;
+    }
+    let c = level_blend(lv, p);
+    if (c <= 0.0) {
+        return g0;
+    }
+    let g1 = gradient(lv.up, p);
+    if (c <= 1.0) {
+        return mix(g0, g1, c);
+    }
+    return mix(g1, gradient(lv.up2, p), c - 1.0);
 }

@@ -119,7 +119,6 @@ pub(crate) struct FrameGeometry {
     placement: Placement,
     scale: f64,
     views: Vec<ViewGeom>,
-    any_planes: bool,
     lightfield: Option<LightField>,
 }
 
@@ -141,13 +140,11 @@ impl FrameGeometry {
                 }
             })
             .collect();
-        let any_planes = views.iter().any(|v| v.planes.is_some());
         FrameGeometry {
             geom: geom.clone(),
             placement: *placement,
             scale,
             views,
-            any_planes,
             lightfield: None,
         }
     }
@@ -183,12 +180,11 @@ impl FrameGeometry {
         let lf = self
             .lightfield
             .filter(|_| self.views.iter().any(|v| v.parallax));
-        let corners = (self.any_planes || lf.is_some()).then(|| self.corners(lo, hi));
+        let corners = self.corners(lo, hi);
         // Light field: the display resolves s(z) at the node's depth closest
         // to the screen plane (0 where the node straddles it).
         let lf_pixels = lf.map(|lf| {
-            let c = corners.as_ref().expect("corners computed for light fields");
-            let (zmin, zmax) = c
+            let (zmin, zmax) = corners
                 .iter()
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
                     (a.min(p.z), b.max(p.z))
@@ -217,7 +213,15 @@ impl FrameGeometry {
             let px = if let (true, Some(p)) = (v.parallax, lf_pixels) {
                 p
             } else {
-                by_distance.max(l12_pixels(
+                // The point-wise size (what multilevel sampling blends by)
+                // at the corners and the closest point.
+                let closest_d = self.placement.to_display(self.geom.extent, closest);
+                let pointwise = corners
+                    .iter()
+                    .chain(std::iter::once(&closest_d))
+                    .map(|&p| point_pixels(p - v.observer, voxel_m, v.screen_dist, v.pixel_m))
+                    .fold(0.0, f64::max);
+                by_distance.max(pointwise).max(l12_pixels(
                     centre - v.observer,
                     radius,
                     voxel_m,
@@ -227,9 +231,9 @@ impl FrameGeometry {
             };
             best_distance = best_distance.max(by_distance);
             best_any = best_any.max(px);
-            let inside = match (&v.planes, &corners) {
-                (Some(p), Some(c)) => box_in_union(p, c),
-                _ => true,
+            let inside = match &v.planes {
+                Some(p) => box_in_union(p, &corners),
+                None => true,
             };
             if inside {
                 seen = true;
@@ -264,6 +268,20 @@ impl FrameGeometry {
 /// L12 §4.2.1 Eq. 1: the size in pixels of one voxel (edge `voxel_m`) of a
 /// node whose bounding sphere (radius `r`) is at `po` from the observer, on
 /// the screen plane `d` away along its normal (pixels of `pixel_m`).
+/// L12 §4.2.1 Eq. 1 in the limit of a small sphere at `rel` from the
+/// observer: a voxel's projection on the screen plane, D·|VP|/Δz² times its
+/// edge (the magnification 1/cos²β off the axis), in pixels. Multilevel
+/// sampling (shaders/shared/sampling.wgsl `lod_offset`) blends levels by
+/// the same size, so refinement takes the largest over a node's corners
+/// and closest point; +∞ where the point reaches the observer's plane.
+fn point_pixels(rel: DVec3, voxel_m: f64, d: f64, pixel_m: f64) -> f64 {
+    let dz = rel.z.abs();
+    if dz <= TOUCHING_M || pixel_m <= 0.0 {
+        return f64::INFINITY;
+    }
+    voxel_m * d * rel.length() / (dz * dz * pixel_m)
+}
+
 fn l12_pixels(po: DVec3, r: f64, voxel_m: f64, d: f64, pixel_m: f64) -> f64 {
     let len = po.length();
     if pixel_m <= 0.0 || r <= 0.0 {
@@ -436,7 +454,14 @@ mod tests {
             (0.5, 2.0, 8.0)
         );
         let voxel_m = 8.0 * 0.3 / 64.0;
-        let want = voxel_m * 2.0 / (1.85 * (0.4 / 64.0));
+        let by_distance = voxel_m * 2.0 / (1.85 * (0.4 / 64.0));
+        assert!((a.distance_pixels - by_distance).abs() < 1e-9 * by_distance);
+        // The point-wise size (L12 for a small sphere, D·|VP|/Δz² per unit)
+        // is largest at the front corners (±0.075, ±0.075, 0.15) m, a
+        // little above the distance's; L12's bounding sphere gives less.
+        let dist = (2.0 * 0.075f64.powi(2) + 1.85f64.powi(2)).sqrt();
+        let want = voxel_m * 2.0 * dist / (1.85 * 1.85 * (0.4 / 64.0));
+        assert!(want > by_distance && want < 1.01 * by_distance);
         assert!(
             (a.pixels - want).abs() < 1e-9 * want,
             "{} vs {want}",

@@ -235,6 +235,10 @@ impl Loader {
         self.lightfield = lightfield;
     }
 
+    pub fn lightfield(&self) -> Option<LightField> {
+        self.lightfield
+    }
+
     /// Starts the loader and its I/O threads over an open database.
     pub fn new(db: Arc<OctreeDb>, cfg: LoaderConfig) -> Self {
         let layout = *db.layout();

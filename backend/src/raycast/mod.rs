@@ -196,6 +196,24 @@ pub struct RenderSettings {
     /// fraction of the pixel's footprint at the leaf's distance, instead of
     /// the leaf's voxel.
     pub adaptive_step: bool,
+    /// Multilevel sampling (G10 §4, Fig. 5): samples blend the leaf's data
+    /// with its parent's and grandparent's as the view's footprint asks,
+    /// so a cut that mixes levels shows no seams. `None`: off.
+    pub multilevel: Option<Multilevel>,
+    /// Tricubic B-spline filtering (L12 §5.1) instead of trilinear.
+    pub tricubic: bool,
+}
+
+/// What multilevel sampling needs to know of refinement: the same footprint
+/// and accuracy decide which levels a sample blends.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Multilevel {
+    /// Refinement's accuracy: a voxel is adequate when it projects to at
+    /// most this many pixels.
+    pub accuracy: f32,
+    /// The light field display whose s(z) sizes the η > 0 views' detail:
+    /// s0 (m) and tan(Φ/2).
+    pub lightfield: Option<(f32, f32)>,
 }
 
 impl Default for RenderSettings {
@@ -213,6 +231,8 @@ impl Default for RenderSettings {
             macrocells: true,
             count_samples: false,
             adaptive_step: false,
+            multilevel: None,
+            tricubic: false,
         }
     }
 }
@@ -254,7 +274,7 @@ pub struct Raycaster {
     /// One pipeline per combination of stepper, enhancers and shading that
     /// a frame has used (G10 §5: a kernel specialised for what the scene
     /// uses), built when first needed.
-    pipelines: HashMap<(KernelKey, [bool; 4]), wgpu::ComputePipeline>,
+    pipelines: HashMap<(KernelKey, [bool; 6]), wgpu::ComputePipeline>,
     /// The pool holds f32 values (else 8-bit codes).
     float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
@@ -541,9 +561,10 @@ impl Raycaster {
         &mut self,
         gpu: &Gpu,
         kernel: &KernelKey,
-        [shading, no_data, macrocells, count]: [bool; 4],
+        flags: [bool; 6],
     ) -> Result<&wgpu::ComputePipeline> {
-        let key = (kernel.clone(), [shading, no_data, macrocells, count]);
+        let [shading, no_data, macrocells, count, multilevel, tricubic] = flags;
+        let key = (kernel.clone(), flags);
         if !self.pipelines.contains_key(&key) {
             let source = shader::kernel(kernel)?;
             let module = gpu.validated("shaders/raycast.wgsl", || {
@@ -561,6 +582,8 @@ impl Raycaster {
                 ("NO_DATA", flag(no_data)),
                 ("MACROCELLS", flag(macrocells)),
                 ("COUNT_SAMPLES", flag(count)),
+                ("MULTILEVEL", flag(multilevel)),
+                ("TRICUBIC", flag(tricubic)),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
                 (
@@ -753,6 +776,8 @@ impl Raycaster {
                     pool.no_data,
                     macrocells,
                     settings.count_samples,
+                    settings.multilevel.is_some() && !k.iso,
+                    settings.tricubic,
                 ],
             )?
             .clone();
@@ -903,6 +928,14 @@ impl Raycaster {
             predict: s.predict,
             tf_offsets,
             tf_mids: [tf.layout.mid_offset, 0, 0, 0],
+            lod: match s.multilevel {
+                None => [0.0; 4],
+                Some(m) => {
+                    let (s0, tan_half) = m.lightfield.unwrap_or((0.0, 0.0));
+                    let lf = if m.lightfield.is_some() { 1.0 } else { 0.0 };
+                    [m.accuracy, s0, tan_half, lf]
+                }
+            },
         }
     }
 }

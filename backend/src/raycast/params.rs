@@ -53,6 +53,9 @@ pub struct GpuFrame {
     pub tf_offsets: [[u32; 4]; 8],
     /// Offset of the bin midpoint values in a table part.
     pub tf_mids: [u32; 4],
+    /// Multilevel sampling: accuracy (pixels per voxel), light field s0
+    /// (m), tan(Φ/2), light field (1) or not (0).
+    pub lod: [f32; 4],
 }
 
 /// WGSL `ToolParams`: one tool's constant parameters (meaning per enhancer,

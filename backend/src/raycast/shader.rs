@@ -78,6 +78,8 @@ pub const OVERRIDES: &[&str] = &[
     "NO_DATA_TAP",
     "MACROCELLS",
     "COUNT_SAMPLES",
+    "MULTILEVEL",
+    "TRICUBIC",
 ];
 
 /// One specialised kernel: the stepper and the enhancer chain.
@@ -416,7 +418,7 @@ mod tests {
             GpuFrame,
             [
                 rt0, rt1, rt2, center, extent, domain, spacing, tf, render, light, counts, pool,
-                optics, aux, iso, predict, tf_offsets, tf_mids
+                optics, aux, iso, predict, tf_offsets, tf_mids, lod
             ]
         );
         check!("IndexNode", IndexNode, [tree, data, range, nx, ny, nz]);
