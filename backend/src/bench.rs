@@ -1060,7 +1060,10 @@ pub struct SeamPoint {
     /// RMSE against the exact integral, before and after.
     pub rmse_before: f64,
     pub rmse_after: f64,
+    /// Leaves with data in the cut, before and after (multilevel sampling
+    /// also refines a node by the point-wise size it blends by).
     pub bricks: u64,
+    pub bricks_after: u64,
     pub ms_before: f64,
     pub ms_after: f64,
 }
@@ -1146,7 +1149,7 @@ pub fn seam_study(out: &Path, n: usize, resolution: [u32; 2]) -> Result<Vec<Seam
     let mut points = Vec::new();
     for accuracy in [4.0, 8.0] {
         let (before, bricks, ms_before) = render(accuracy, false)?;
-        let (after, _, ms_after) = render(accuracy, true)?;
+        let (after, bricks_after, ms_after) = render(accuracy, true)?;
         let e0 = diff(&before);
         // A ray that met full-detail bricks only (or that a coarse brick
         // changed by less than 1e-4) against one that a coarse one changed.
@@ -1193,14 +1196,16 @@ pub fn seam_study(out: &Path, n: usize, resolution: [u32; 2]) -> Result<Vec<Seam
             rmse_before: image_error(&before, &reference).0,
             rmse_after: image_error(&after, &reference).0,
             bricks,
+            bricks_after,
             ms_before,
             ms_after,
         };
         eprintln!(
-            "accuracy {accuracy}: {} bricks, {pairs} pixel pairs across level changes; largest \
+            "accuracy {accuracy}: {} → {} bricks, {pairs} pixel pairs across level changes; largest \
              step there {:.2e} with one level per brick, {:.2e} with multilevel sampling; RMSE \
              {:.2e} → {:.2e}; {:.0} → {:.0} ms",
             p.bricks,
+            p.bricks_after,
             p.jump_before,
             p.jump_after,
             p.rmse_before,
@@ -1212,12 +1217,13 @@ pub fn seam_study(out: &Path, n: usize, resolution: [u32; 2]) -> Result<Vec<Seam
     }
     write_table(
         &out.join("seams.csv"),
-        "accuracy,bricks_in_cut,seam_pixel_pairs,jump_one_level,jump_multilevel,rmse_one_level,rmse_multilevel,ms_one_level,ms_multilevel",
+        "accuracy,bricks_one_level,bricks_multilevel,seam_pixel_pairs,jump_one_level,jump_multilevel,rmse_one_level,rmse_multilevel,ms_one_level,ms_multilevel",
         points.iter().map(|p| {
             format!(
-                "{},{},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.1},{:.1}",
+                "{},{},{},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.1},{:.1}",
                 p.accuracy,
                 p.bricks,
+                p.bricks_after,
                 p.seam_pairs,
                 p.jump_before,
                 p.jump_after,

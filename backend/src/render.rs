@@ -363,6 +363,7 @@ impl Renderer {
         if self.sync_io {
             self.loader.wait_idle();
         }
+        self.loader.set_accuracy(cfg.accuracy);
         let t = Instant::now();
         let table = if cfg.refraction {
             &tf.empty_refraction
@@ -423,7 +424,13 @@ impl Renderer {
             } else {
                 0.0
             };
-            self.pool.upload(&self.gpu, u.slot, &u.data, norm);
+            self.pool.upload(
+                &self.gpu,
+                u.slot,
+                &u.data.values,
+                u.data.cells.as_deref(),
+                norm,
+            );
             if cfg.macrocells && !self.cells_stale {
                 self.pool
                     .mark_cells(u.slot, &|lo, hi| tf.empty.is_empty(lo, hi));

@@ -442,3 +442,75 @@ fn format_two_files_still_read() {
     assert!(moved > 0, "the unit grid changed some bricks");
     assert!(new.summary.quant_max <= old.summary.quant_max);
 }
+
+/// Format 4: every stored brick carries its macrocell ranges (L12 §4.1),
+/// computed by the importer from the values the renderer interpolates;
+/// each stored range holds every value interpolation inside its cell can
+/// read, and is at most one code (1/255 of the brick's range) wider on each
+/// side. Files of formats 1–3 carry none (the pool computes them).
+#[test]
+fn stored_macrocell_ranges_hold_what_interpolation_reads() {
+    use store::cells;
+    let dir = tempfile::tempdir().unwrap();
+    let dims = [48, 40, 36];
+    let src = test_volume(dims);
+    // A float volume with a few no-data voxels (NaN, `--nan empty`).
+    let vol = Volume::from_fn(dims, src.info.spacing, VoxelType::F32, |i, j, k| {
+        let at = (k * dims[1] + j) * dims[0] + i;
+        if [5000, 5001, 20_000].contains(&at) {
+            f32::NAN
+        } else {
+            src.data[at]
+        }
+    });
+    for encoding in [
+        BrickEncoding::U8Range,
+        BrickEncoding::U16Range,
+        BrickEncoding::F32,
+    ] {
+        let out = dir.path().join(format!("{encoding:?}.pxo"));
+        import(
+            &vol,
+            &out,
+            &ImportOptions {
+                brick: 16,
+                encoding,
+                ..Default::default()
+            },
+        );
+        let db = OctreeDb::open(&out).unwrap();
+        assert!(db.stores_cells());
+        let (c, _) = cells::layout(16);
+        let mut checked = 0;
+        for n in db.nodes.iter().filter(|n| n.is_stored()) {
+            let brick = db.read_brick_cells(n.key).unwrap().unwrap();
+            let stored = brick.cells.expect("format 4 stores cells");
+            assert_eq!(stored.len(), c * c * c);
+            let exact = cells::ranges(16, |i| {
+                let v = brick.values[i];
+                (!v.is_nan()).then_some(v as f64)
+            });
+            let step = (n.max - n.min) / 255.0 * 1.0001 + 1e-6;
+            for (s, e) in stored.iter().zip(&exact) {
+                if e[0] > e[1] {
+                    assert!(s[0] > s[1], "{encoding:?} {}: a cell without data", n.key);
+                    continue;
+                }
+                assert!(
+                    s[0] <= e[0] && s[1] >= e[1],
+                    "{encoding:?} {}: {s:?} ⊉ {e:?}",
+                    n.key
+                );
+                assert!(e[0] - s[0] <= step && s[1] - e[1] <= step, "{s:?} vs {e:?}");
+                checked += 1;
+            }
+        }
+        eprintln!("{encoding:?}: {checked} cells checked");
+        assert!(checked > 500);
+    }
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    let old = OctreeDb::open(&fixtures.join("v2-ml24.pxo")).unwrap();
+    assert!(!old.stores_cells());
+    let root = old.read_brick_cells(NodeKey::root()).unwrap().unwrap();
+    assert!(root.cells.is_none());
+}

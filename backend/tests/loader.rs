@@ -98,7 +98,7 @@ impl Pool {
         let side = db.layout().stored_side();
         for u in &f.uploads {
             assert!(u.slot < gpu_slots, "slot {} of {gpu_slots}", u.slot);
-            assert_eq!(u.data.len(), side * side * side);
+            assert_eq!(u.data.values.len(), side * side * side);
             self.slots.insert(u.slot, u.key);
         }
         assert!(f.stats.gpu_resident <= gpu_slots as usize);
@@ -364,6 +364,7 @@ fn a_bright_detail_under_dropped_parents_is_still_reached() {
         loader
             .brick_data(owner)
             .unwrap()
+            .values
             .iter()
             .cloned()
             .fold(0.0, f32::max),

@@ -62,7 +62,7 @@ fn full_cut(
     for (slot, n) in db.nodes.iter().enumerate() {
         let data = db.read_brick(n.key).unwrap();
         if let Some(d) = &data {
-            pool.upload(gpu, slot as u32, d, 0.0);
+            pool.upload(gpu, slot as u32, d, None, 0.0);
         }
         cut.insert(
             n.key,

@@ -574,7 +574,7 @@ fn out_of_core_volume_converges_within_budget() {
 
     // Full detail, and a uniformly coarser cut that fits the budget.
     let mut refs = Vec::new();
-    for accuracy in [cfg.accuracy, 1.25] {
+    for accuracy in [cfg.accuracy, 1.5] {
         let big = RenderConfig {
             cpu_cache_mb: 1024.0,
             gpu_cache_mb: 512.0,
@@ -605,7 +605,7 @@ fn out_of_core_volume_converges_within_budget() {
     );
     assert!(refs[1].stats.resident <= slots, "the coarser cut fits");
     let (fit_err, _) = diff(&refs[1].images[0], best);
-    eprintln!("accuracy 1.25 (fits the budget) vs full detail: RMSE {fit_err:.3e}");
+    eprintln!("accuracy 1.5 (fits the budget) vs full detail: RMSE {fit_err:.3e}");
 
     let mut r = renderer(&db, &tf, &cfg);
     r.sync_io = true;
@@ -674,9 +674,9 @@ fn out_of_core_volume_converges_within_budget() {
     assert!(s.resident + 8 > slots, "the pool is full");
     // At least as good as the best uniform-accuracy cut that fits.
     assert!(last <= fit_err, "{last} vs {fit_err}");
-    // Measured: 1.89e-2 (frame 1: 4.5e-2). Not below 1e-2: what is missing
+    // Measured: 2.0e-2 (frame 1: 4.6e-2). Not below 1e-2: what is missing
     // is the full-detail refinement of the bricks nearest the eye, which
-    // needs 3.6× the pool; the accuracy-1.0 cut that fits is 1.91e-2 off too.
+    // needs 6× the pool; the accuracy-1.5 cut that fits is 2.1e-2 off.
     assert!(last < 2.5e-2, "last frame RMSE {last}");
 }
 

@@ -2,13 +2,13 @@
 //! (LRU, fixed byte budget) and the GPU brick pool (a fixed number of slots,
 //! LRU, with the slots of the current cut pinned).
 
-use crate::store::NodeKey;
+use crate::store::{Brick, NodeKey};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 
 /// Bytes a decoded brick takes in the CPU cache.
-pub(crate) fn brick_bytes(data: &[f32]) -> u64 {
-    std::mem::size_of_val(data) as u64
+pub(crate) fn brick_bytes(data: &Brick) -> u64 {
+    data.bytes()
 }
 
 /// CPU level-2 cache of decoded bricks, least recently used first out, never
@@ -16,7 +16,7 @@ pub(crate) fn brick_bytes(data: &[f32]) -> u64 {
 /// level-2 cache … managed using a LRU policy").
 #[derive(Debug)]
 pub(crate) struct ByteLru {
-    map: HashMap<NodeKey, (Arc<Vec<f32>>, u64)>,
+    map: HashMap<NodeKey, (Arc<Brick>, u64)>,
     order: BTreeMap<u64, NodeKey>,
     bytes: u64,
     budget: u64,
@@ -48,12 +48,12 @@ impl ByteLru {
     }
 
     /// The brick without touching its recency.
-    pub fn peek(&self, key: NodeKey) -> Option<&Arc<Vec<f32>>> {
+    pub fn peek(&self, key: NodeKey) -> Option<&Arc<Brick>> {
         self.map.get(&key).map(|(d, _)| d)
     }
 
     /// The brick, marked most recently used.
-    pub fn get(&mut self, key: NodeKey) -> Option<Arc<Vec<f32>>> {
+    pub fn get(&mut self, key: NodeKey) -> Option<Arc<Brick>> {
         self.touch(key);
         self.peek(key).cloned()
     }
@@ -71,7 +71,7 @@ impl ByteLru {
     /// Inserts a brick as most recently used, evicting the least recently
     /// used ones until the budget holds. A brick larger than the whole budget
     /// is not kept (returns false).
-    pub fn insert(&mut self, key: NodeKey, data: Arc<Vec<f32>>) -> bool {
+    pub fn insert(&mut self, key: NodeKey, data: Arc<Brick>) -> bool {
         self.remove(key);
         let size = brick_bytes(&data);
         if size > self.budget {
@@ -188,28 +188,35 @@ mod tests {
         NodeKey::new(3, x, 0, 0)
     }
 
+    fn brick(n: usize, v: f32) -> Arc<Brick> {
+        Arc::new(Brick {
+            values: vec![v; n],
+            cells: None,
+        })
+    }
+
     #[test]
     fn byte_lru_evicts_least_recent_and_keeps_the_budget() {
         let mut c = ByteLru::new(3 * 400);
         for x in 0..3 {
-            assert!(c.insert(k(x), Arc::new(vec![0.0; 100])));
+            assert!(c.insert(k(x), brick(100, 0.0)));
         }
         assert_eq!(c.bytes(), 1200);
         c.touch(k(0));
-        c.insert(k(3), Arc::new(vec![0.0; 100]));
+        c.insert(k(3), brick(100, 0.0));
         assert!(c.contains(k(0)) && !c.contains(k(1)) && c.contains(k(2)) && c.contains(k(3)));
         // a bigger brick evicts two
-        c.insert(k(4), Arc::new(vec![0.0; 200]));
+        c.insert(k(4), brick(200, 0.0));
         assert_eq!(c.len(), 2);
         assert!(c.contains(k(3)) && c.contains(k(4)));
         assert_eq!(c.bytes(), 1200);
         // too big for the budget: not kept, nothing evicted
-        assert!(!c.insert(k(5), Arc::new(vec![0.0; 301])));
+        assert!(!c.insert(k(5), brick(301, 0.0)));
         assert_eq!(c.len(), 2);
         // re-inserting replaces
-        c.insert(k(4), Arc::new(vec![1.0; 50]));
+        c.insert(k(4), brick(50, 1.0));
         assert_eq!(c.bytes(), 600);
-        assert_eq!(c.peek(k(4)).unwrap()[0], 1.0);
+        assert_eq!(c.peek(k(4)).unwrap().values[0], 1.0);
     }
 
     #[test]

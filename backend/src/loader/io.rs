@@ -8,17 +8,17 @@
 //! at a time and sends the result back on a channel, which the loader drains
 //! without blocking at the start of the next frame.
 
-use crate::store::{NodeKey, OctreeDb};
+use crate::store::{Brick, NodeKey, OctreeDb};
 use std::collections::VecDeque;
 use std::sync::mpsc::{self, Receiver, RecvError, Sender, TryRecvError};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 
-/// A brick read by an I/O thread: its values ((B+4)³, `None` when the node is
-/// not stored) or the error, as text.
+/// A brick read by an I/O thread: its values ((B+4)³) and stored macrocell
+/// ranges (`None` when the node is not stored), or the error, as text.
 pub(crate) struct Landed {
     pub key: NodeKey,
-    pub result: Result<Option<Vec<f32>>, String>,
+    pub result: Result<Option<Brick>, String>,
 }
 
 struct Queue {
@@ -117,15 +117,16 @@ fn worker(db: &OctreeDb, shared: &Shared, tx: &Sender<Landed>) {
         };
         // A failing brick is reported, never fatal (not even a panic in the
         // decoder).
-        let result =
-            match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| db.read_brick(key))) {
-                Ok(Ok(v)) => Ok(v),
-                Ok(Err(e)) => Err(format!("{e:#}")),
-                Err(_) => Err(format!(
-                    "{}: brick {key}: the reader panicked",
-                    db.path().display()
-                )),
-            };
+        let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            db.read_brick_cells(key)
+        })) {
+            Ok(Ok(v)) => Ok(v),
+            Ok(Err(e)) => Err(format!("{e:#}")),
+            Err(_) => Err(format!(
+                "{}: brick {key}: the reader panicked",
+                db.path().display()
+            )),
+        };
         if tx.send(Landed { key, result }).is_err() {
             return;
         }

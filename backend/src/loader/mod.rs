@@ -31,7 +31,7 @@ mod io;
 mod ranges;
 
 use crate::index::{CutNode, SpatialIndex, MAX_INDEX_NODES, NO_SLOT};
-use crate::store::{NodeKey, OctreeDb};
+use crate::store::{Brick, NodeKey, OctreeDb};
 use cache::{ByteLru, SlotPool};
 use feedback::Visibility;
 pub use geometry::LightField;
@@ -87,8 +87,8 @@ impl Default for LoaderConfig {
 pub struct Upload {
     pub slot: u32,
     pub key: NodeKey,
-    /// (B+4)³ decoded values, x fastest.
-    pub data: Arc<Vec<f32>>,
+    /// (B+4)³ decoded values, x fastest, and the stored macrocell ranges.
+    pub data: Arc<Brick>,
 }
 
 /// One frame's cut.
@@ -233,6 +233,12 @@ impl Loader {
     /// s(z) = s0 + 2|z|·tan(Φ/2) (G10 §4) instead of the pixel grid.
     pub fn set_lightfield(&mut self, lightfield: Option<LightField>) {
         self.lightfield = lightfield;
+    }
+
+    /// The accuracy of the coming frames' refinement (the one multilevel
+    /// sampling blends by).
+    pub fn set_accuracy(&mut self, accuracy: f64) {
+        self.cfg.accuracy = accuracy;
     }
 
     pub fn lightfield(&self) -> Option<LightField> {
@@ -416,7 +422,7 @@ impl Loader {
     }
 
     /// A decoded brick from the CPU cache.
-    pub fn brick_data(&self, key: NodeKey) -> Option<Arc<Vec<f32>>> {
+    pub fn brick_data(&self, key: NodeKey) -> Option<Arc<Brick>> {
         self.l2.peek(key).cloned()
     }
 
@@ -446,9 +452,9 @@ impl Loader {
     fn land(&mut self, l: Landed) {
         self.in_flight.remove(&l.key);
         match l.result {
-            Ok(Some(values)) => {
+            Ok(Some(brick)) => {
                 self.bytes_read += self.db.node(l.key).map_or(0, |r| r.len as u64);
-                self.l2.insert(l.key, Arc::new(values));
+                self.l2.insert(l.key, Arc::new(brick));
             }
             Ok(None) => {}
             Err(e) => {
@@ -736,7 +742,13 @@ mod tests {
         loader.gpu.begin_frame();
         assert_eq!(loader.gpu.available(), 10);
         for k in [root, kids[0]] {
-            loader.l2.insert(k, Arc::new(vec![100.0; side]));
+            loader.l2.insert(
+                k,
+                Arc::new(Brick {
+                    values: vec![100.0; side],
+                    cells: None,
+                }),
+            );
         }
         let view = View::window([32, 32], [0.4, 0.4], [0.0, 0.0, 1.0]);
         let placement = Placement {

@@ -27,8 +27,9 @@ const SLOT_BYTES: u64 = 16 + CELL_WORDS as u64 * 4;
 /// the pre-integrated segment is zero), and the samples after it fall where
 /// they would have: the image does not change.
 ///
-/// The ranges come from the decoded brick at upload (one pass over its
-/// values), not from the database: every `.pxo` gets them, old or new.
+/// The ranges come with the brick from the database (format 4, computed by
+/// the importer: `store::cells`); for older files, from the decoded brick at
+/// upload (one pass over its values).
 pub struct Macrocells {
     /// Cells per axis C (0: bricks whose side no cell size divides; none).
     pub per_axis: u32,
@@ -48,15 +49,14 @@ impl Macrocells {
     /// The cell size for bricks of side `b`: 4 voxels, doubled until at
     /// most 8 cells per axis; none when it does not divide `b`.
     pub fn layout(b: u32) -> (u32, u32) {
-        let mut m = 4;
-        while b / m > 8 {
-            m *= 2;
-        }
-        if b >= m && b.is_multiple_of(m) {
-            (b / m, m)
-        } else {
-            (0, m)
-        }
+        let (c, m) = crate::store::cells::layout(b as usize);
+        (c as u32, m as u32)
+    }
+
+    /// A brick's ranges as the database stores them.
+    fn set_stored(&mut self, slot: u32, cells: &[[f32; 2]]) {
+        let n = self.cells();
+        self.ranges[slot as usize * n..(slot as usize + 1) * n].copy_from_slice(cells);
     }
 
     fn cells(&self) -> usize {
@@ -279,8 +279,16 @@ impl BrickPool {
 
     /// Copies a brick's (B+4)³ data values into a slot. `variance` is the
     /// brick's variance placed on [0, 1] among the dataset's bricks (the
-    /// prediction buffer's step, B10 §4.5).
-    pub fn upload(&mut self, gpu: &Gpu, slot: u32, values: &[f32], variance: f32) {
+    /// prediction buffer's step, B10 §4.5). `cells`: the brick's macrocell
+    /// ranges as stored (format 4), else they are computed from `values`.
+    pub fn upload(
+        &mut self,
+        gpu: &Gpu,
+        slot: u32,
+        values: &[f32],
+        cells: Option<&[[f32; 2]]>,
+        variance: f32,
+    ) {
         let s = self.side;
         assert_eq!(values.len(), (s * s * s) as usize, "brick size");
         assert!(slot < self.slots(), "slot {slot} out of the pool");
@@ -360,7 +368,10 @@ impl BrickPool {
                 depth_or_array_layers: s,
             },
         );
-        if self.cells.per_axis > 0 {
+        let n_cells = self.cells.cells();
+        if let Some(stored) = cells.filter(|c| n_cells > 0 && c.len() == n_cells) {
+            self.cells.set_stored(slot, stored);
+        } else if self.cells.per_axis > 0 {
             if self.float {
                 self.cells.set_ranges(slot, s, |i| {
                     let v = values[i];

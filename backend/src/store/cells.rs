@@ -24,8 +24,10 @@ impl Brick {
     /// Bytes the brick takes in memory.
     pub fn bytes(&self) -> u64 {
         (std::mem::size_of_val(self.values.as_slice())
-            + self.cells.as_ref().map_or(0, |c| std::mem::size_of_val(c.as_slice())))
-            as u64
+            + self
+                .cells
+                .as_ref()
+                .map_or(0, |c| std::mem::size_of_val(c.as_slice()))) as u64
     }
 }
 
@@ -136,7 +138,9 @@ mod tests {
             .collect();
         let (min, max) = values
             .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
         let exact = ranges(b, |i| Some(values[i] as f64));
         assert_eq!(exact.len(), layout(b).0.pow(3));
         let stored = encode(&exact, min, max);
@@ -148,9 +152,16 @@ mod tests {
             assert!(e[0] - d[0] <= step * 1.001 && d[1] - e[1] <= step * 1.001);
         }
         // No data, a constant brick, and sides no cell size divides.
-        let none = decode(&encode(&[[f32::INFINITY, f32::NEG_INFINITY]], 0.0, 1.0), 0.0, 1.0);
+        let none = decode(
+            &encode(&[[f32::INFINITY, f32::NEG_INFINITY]], 0.0, 1.0),
+            0.0,
+            1.0,
+        );
         assert!(none[0][0] > none[0][1]);
-        assert_eq!(decode(&encode(&[[3.0, 3.0]], 3.0, 3.0), 3.0, 3.0), [[3.0, 3.0]]);
+        assert_eq!(
+            decode(&encode(&[[3.0, 3.0]], 3.0, 3.0), 3.0, 3.0),
+            [[3.0, 3.0]]
+        );
         assert_eq!(layout(32), (8, 4));
         assert_eq!(layout(64), (8, 8));
         assert_eq!(layout(6), (0, 4));

@@ -493,6 +493,18 @@ pub fn decode(
             computed,
         });
     }
+    decode_checked(stored, min, max, encoding, len, framing)
+}
+
+/// [`decode`] of bytes whose checksum was already checked.
+pub fn decode_checked(
+    stored: &[u8],
+    min: f32,
+    max: f32,
+    encoding: BrickEncoding,
+    len: usize,
+    framing: Framing,
+) -> Result<Vec<f32>, DecodeError> {
     let raw = decompress(stored, encoding, len * bytes_per_value(encoding), framing)?;
     let no_data = framing == Framing::Tagged && stored[0] & NO_DATA_BIT != 0;
     let unit = framing == Framing::Tagged && stored[0] & UNIT_STEP_BIT != 0;

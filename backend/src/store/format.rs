@@ -3,7 +3,8 @@
 //! ```text
 //! 0      magic "PXOCTREE", version u32, header length u32, header CRC-32 u32
 //! 20     header (bincode): volume info, brick size, levels, encoding
-//! …      brick blobs (LZ4, each with its own CRC-32 in its node record)
+//! …      brick blobs (codec tag, compressed values, then the macrocell
+//!        ranges; each with its own CRC-32 in its node record)
 //! T      trailer (bincode): node records (sorted by level, z, y, x) and the
 //!        import summary
 //! end−32 footer: trailer offset u64, trailer length u64, trailer CRC-32 u32,
@@ -24,8 +25,13 @@ pub const FOOTER_MAGIC: [u8; 8] = *b"PXOEND\0\0";
 /// The format written. Format 1 (LZ4 bricks without a codec tag) still reads;
 /// format 2 tags every brick with its codec; format 3 adds the unit-step
 /// quantisation bit to the tag (lossless 8/16-bit integer bricks; older
-/// builds refuse the file by its version rather than misread a brick).
-pub const VERSION: u32 = 3;
+/// builds refuse the file by its version rather than misread a brick);
+/// format 4 appends each brick's macrocell ranges to its blob, under its
+/// checksum (`cells`: two bytes a cell; formats 1–3 get them computed when
+/// a brick is uploaded).
+pub const VERSION: u32 = 4;
+/// The first format whose bricks carry their macrocell ranges.
+pub const CELLS_VERSION: u32 = 4;
 /// The oldest format read.
 pub const OLDEST_VERSION: u32 = 1;
 /// Bytes before the header: magic, version, header length, header CRC.

@@ -10,6 +10,7 @@
 //! bounded by the windows: Σ_l (B+5)·nx_l·ny_l values, whatever the depth of
 //! the volume. Nothing else of the volume is held.
 
+use crate::store::cells;
 use crate::store::codec::{self, BrickEncoding, Codec};
 use crate::store::writer::NodeStats;
 use crate::store::{Header, NodeKey, OctreeLayout, OctreeWriter, Summary, OVERLAP};
@@ -448,20 +449,29 @@ fn encode_brick(
     if empty {
         return e;
     }
-    let bytes = codec::encode(&values, min, max, opts.encoding, opts.codec);
-    if leaf && opts.encoding != BrickEncoding::F32 {
-        // Measure the quantisation error on the source voxels this brick owns,
-        // through the same decoder the renderer uses.
-        let decoded = codec::decode(
+    let mut bytes = codec::encode(&values, min, max, opts.encoding, opts.codec);
+    // What the renderer will interpolate: the values as decoded.
+    let decoded = (opts.encoding != BrickEncoding::F32).then(|| {
+        codec::decode_checked(
             &bytes,
-            codec::checksum(&bytes),
             min,
             max,
             opts.encoding,
             values.len(),
             codec::Framing::Tagged,
         )
-        .expect("a brick just encoded decodes");
+        .expect("a brick just encoded decodes")
+    });
+    // Its macrocell ranges follow the encoded values (format 4).
+    let seen = decoded.as_deref().unwrap_or(&values);
+    let cell_ranges = cells::ranges(b, |i| {
+        let v = seen[i];
+        (!v.is_nan()).then_some(v as f64)
+    });
+    bytes.extend_from_slice(&cells::encode(&cell_ranges, min, max));
+    if let (true, Some(decoded)) = (leaf, &decoded) {
+        // Measure the quantisation error on the source voxels this brick owns,
+        // through the same decoder the renderer uses.
         for z in rz {
             for y in ry.clone() {
                 for x in rx.clone() {

@@ -18,6 +18,7 @@
 //! * [`writer`] and [`reader`]: crash-safe writing, random access reading.
 //! * [`import`]: volume → `.pxo`; [`info`]: what `parallax info` shows.
 
+pub mod cells;
 pub mod codec;
 pub mod format;
 pub mod import;
@@ -26,6 +27,7 @@ pub mod layout;
 pub mod reader;
 pub mod writer;
 
+pub use cells::Brick;
 pub use codec::BrickEncoding;
 pub use format::{Header, NodeRecord, Summary};
 pub use import::{import, ImportOptions, ImportReport};

@@ -2,9 +2,10 @@
 //! open; each brick is read on its own with a positioned read, checked against
 //! its CRC and decoded. Every error names the file and, for a brick, which one.
 
+use super::cells::{self, Brick};
 use super::codec::{self, BrickEncoding, Framing};
 use super::format::{
-    bincode_config, Footer, Header, NodeRecord, Summary, Trailer, FOOTER_LEN, MAGIC,
+    bincode_config, Footer, Header, NodeRecord, Summary, Trailer, CELLS_VERSION, FOOTER_LEN, MAGIC,
     OLDEST_VERSION, PREAMBLE_LEN, VERSION,
 };
 use super::layout::{NodeKey, OctreeLayout};
@@ -20,6 +21,9 @@ pub struct OctreeDb {
     file_len: u64,
     /// How bricks are framed (from the format version).
     framing: Framing,
+    /// Bytes of macrocell ranges at the end of each brick blob (format 4;
+    /// 0 before, or where the brick size has no macrocells).
+    cells_len: usize,
     pub header: Header,
     pub nodes: Vec<NodeRecord>,
     pub summary: Summary,
@@ -96,7 +100,12 @@ impl OctreeDb {
                 layout.brick
             );
         }
-        let max_blob = codec::max_encoded_len(layout.stored_len(), header.encoding);
+        let cells_len = if version >= CELLS_VERSION {
+            cells::stored_len(layout.brick)
+        } else {
+            0
+        };
+        let max_blob = codec::max_encoded_len(layout.stored_len(), header.encoding) + cells_len;
         let mut index = HashMap::with_capacity(trailer.nodes.len());
         for (i, n) in trailer.nodes.iter().enumerate() {
             if !layout.contains(n.key) {
@@ -109,6 +118,13 @@ impl OctreeDb {
                         .is_none_or(|e| e > footer.trailer_offset))
             {
                 bail!("{name}: brick {} points outside the brick area", n.key);
+            }
+            if n.is_stored() && (n.len as usize) <= cells_len {
+                bail!(
+                    "{name}: brick {} is {} bytes, too short for its {cells_len} bytes of macrocells",
+                    n.key,
+                    n.len
+                );
             }
             if n.len as usize > max_blob {
                 bail!(
@@ -146,6 +162,7 @@ impl OctreeDb {
             file,
             file_len,
             framing,
+            cells_len,
             header,
             nodes: trailer.nodes,
             summary: trailer.summary,
@@ -195,10 +212,11 @@ impl OctreeDb {
         Ok(Some((rec, bytes)))
     }
 
-    /// A stored brick's bytes as they are on disk (checksum checked), or
-    /// `None` for an empty node.
+    /// A stored brick's encoded values as they are on disk (checksum
+    /// checked; the macrocell ranges of format 4 left out), or `None` for an
+    /// empty node.
     pub fn read_stored(&self, key: NodeKey) -> Result<Option<Vec<u8>>> {
-        let Some((rec, bytes)) = self.read_raw(key)? else {
+        let Some((rec, mut bytes)) = self.read_raw(key)? else {
             return Ok(None);
         };
         anyhow::ensure!(
@@ -207,27 +225,50 @@ impl OctreeDb {
             self.path.display(),
             rec.offset
         );
+        bytes.truncate(bytes.len() - self.cells_len);
         Ok(Some(bytes))
+    }
+
+    /// Whether the bricks carry their macrocell ranges (format 4).
+    pub fn stores_cells(&self) -> bool {
+        self.cells_len > 0
     }
 
     /// Reads, checks and decodes a stored brick: (B+4)³ data values, x fastest.
     /// An empty (not stored) node decodes to `None`.
     pub fn read_brick(&self, key: NodeKey) -> Result<Option<Vec<f32>>> {
+        Ok(self.read_brick_cells(key)?.map(|b| b.values))
+    }
+
+    /// [`read_brick`](Self::read_brick) with the brick's macrocell ranges
+    /// where the file stores them (format 4).
+    pub fn read_brick_cells(&self, key: NodeKey) -> Result<Option<Brick>> {
         let name = self.path.display();
         let Some((rec, bytes)) = self.read_raw(key)? else {
             return Ok(None);
         };
-        let values = codec::decode(
-            &bytes,
-            rec.crc,
+        let fail = |e: codec::DecodeError| {
+            anyhow::anyhow!("{name}: brick {key} (offset {}): {e}", rec.offset)
+        };
+        let computed = codec::checksum(&bytes);
+        if computed != rec.crc {
+            return Err(fail(codec::DecodeError::Checksum {
+                stored: rec.crc,
+                computed,
+            }));
+        }
+        let (blob, cell_bytes) = bytes.split_at(bytes.len() - self.cells_len);
+        let values = codec::decode_checked(
+            blob,
             rec.min,
             rec.max,
             self.header.encoding,
             self.header.layout.stored_len(),
             self.framing,
         )
-        .map_err(|e| anyhow::anyhow!("{name}: brick {key} (offset {}): {e}", rec.offset))?;
-        Ok(Some(values))
+        .map_err(fail)?;
+        let cells = (self.cells_len > 0).then(|| cells::decode(cell_bytes, rec.min, rec.max));
+        Ok(Some(Brick { values, cells }))
     }
 }
 
@@ -295,13 +336,18 @@ mod tests {
         };
         let mut w = OctreeWriter::create(path, &header).unwrap();
         let values = vec![10.0f32; layout.stored_len()];
-        let blob = codec::encode(
+        let mut blob = codec::encode(
             &values,
             0.0,
             10.0,
             BrickEncoding::U8Range,
             codec::Codec::DEFAULT,
         );
+        blob.extend(cells::encode(
+            &cells::ranges(4, |i| Some(values[i] as f64)),
+            0.0,
+            10.0,
+        ));
         let stats = NodeStats {
             min: 0.0,
             max: 10.0,
