@@ -37,32 +37,57 @@ override MACROCELLS: bool = false;
 // Count the samples taken (`counters`): benches and tests.
 override COUNT_SAMPLES: bool = false;
 
-// The macrocell of `leaf` the ray is in at `tc`: where the ray leaves it
-// (x), and, when the cell is empty, the largest k with t + k·h inside it and
-// before `t_end` (y; samples fall at t + k·h in a leaf), else 0.
-fn macrocell(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t: f32, h: f32,
-             tc: f32, t_end: f32) -> vec2<f32> {
+// The part of [t0, t1] in which the ray crosses non-empty macrocells of
+// `leaf`: (where it enters the first, where it leaves the last), or x > y
+// when every cell it crosses is empty. A 3D DDA over the brick's C³ cells
+// (Amanatides and Woo), done once as the ray enters the leaf, so the sample
+// loop carries no per-sample test (on SIMD hardware a rare branch taken by
+// one lane is paid by all of them).
+fn cell_span(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
     let voxel = frame.spacing.xyz * f32(1u << (frame.counts.y - leaf.level));
-    let per_axis = frame.aux.z;
-    let m = f32(frame.aux.w);
-    let base = leaf.cell * f32(frame.counts.x);
-    let c = clamp(floor(((o + d * tc) / voxel - base) / m), vec3<f32>(0.0),
-                  vec3<f32>(f32(per_axis) - 1.0));
-    let lo = (base + c * m) * voxel;
-    let hi = lo + m * voxel;
-    let tx = select(select((lo - o) * inv_d, (hi - o) * inv_d, d > vec3<f32>(0.0)),
-                    vec3<f32>(3.0e38), abs(d) < vec3<f32>(1e-30));
-    let t_cell = min(min(tx.x, tx.y), tx.z);
-    let i = u32(c.x) + per_axis * (u32(c.y) + per_axis * u32(c.z));
-    if (((slots[leaf.slot].cells[i / 32u] >> (i % 32u)) & 1u) == 0u) {
-        return vec2<f32>(t_cell, 0.0);
+    let n = frame.aux.z;
+    let cell = voxel * f32(frame.aux.w);
+    let base = leaf.cell * f32(frame.counts.x) * voxel;
+    // The cell of the point a little past t0 (a point on a face belongs
+    // to the cell the ray enters).
+    let tm = t0 + 1e-4 * min(t1 - t0, min(min(cell.x, cell.y), cell.z));
+    var c = vec3<i32>(clamp(floor((o + d * tm - base) / cell), vec3<f32>(0.0),
+                            vec3<f32>(f32(n) - 1.0)));
+    let step = vec3<i32>(sign(d));
+    let big = vec3<f32>(3.0e38);
+    let t_delta = select(abs(cell * inv_d), big, abs(d) < vec3<f32>(1e-30));
+    let next_face = base + (vec3<f32>(c) + select(vec3<f32>(0.0), vec3<f32>(1.0), d > vec3<f32>(0.0))) * cell;
+    var t_max = select((next_face - o) * inv_d, big, abs(d) < vec3<f32>(1e-30));
+    var t_in = t0;
+    var first = 3.0e38;
+    var last = -3.0e38;
+    let words = leaf.slot;
+    for (var i = 0u; i < 3u * n; i = i + 1u) {
+        let t_out = min(min(t_max.x, t_max.y), t_max.z);
+        let k = u32(c.x) + n * (u32(c.y) + n * u32(c.z));
+        if (((slots[words].cells[k / 32u] >> (k % 32u)) & 1u) == 0u) {
+            first = min(first, t_in);
+            last = min(t_out, t1);
+        }
+        if (t_out >= t1) {
+            break;
+        }
+        t_in = t_out;
+        if (t_max.x <= t_max.y && t_max.x <= t_max.z) {
+            c.x = c.x + step.x;
+            t_max.x = t_max.x + t_delta.x;
+        } else if (t_max.y <= t_max.z) {
+            c.y = c.y + step.y;
+            t_max.y = t_max.y + t_delta.y;
+        } else {
+            c.z = c.z + step.z;
+            t_max.z = t_max.z + t_delta.z;
+        }
+        if (any(c < vec3<i32>(0)) || any(c >= vec3<i32>(i32(n)))) {
+            break;
+        }
     }
-    let t_to = min(t_cell, t_end);
-    var k = floor((t_to - t) / h);
-    if (k >= 1.0 && t + k * h > t_to) {
-        k = k - 1.0;
-    }
-    return vec2<f32>(t_cell, max(k, 0.0));
+    return vec2<f32>(max(first, t0), last);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -224,45 +249,74 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (ISO && sparse) {
                 h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slots[slot].range.z));
             }
-            if (!have_prev) {
+            // Samples fall at t + k·h (and where the leaf ends or a tool's
+            // boundary lies).
+            var tc = t;
+            var k = 1u;
+            // Macrocells: the last sample index to march to (after it the
+            // march jumps to the leaf's exit), and whether the first sample
+            // taken only starts the march (its segment lies in empty cells).
+            var k_end = 0xFFFFFFFFu;
+            var skip_first = false;
+            if (MACROCELLS && !blend) {
+                // Segments inside empty macrocells add exactly nothing: march
+                // only from the last sample before the first non-empty cell
+                // to the first sample after the last one, on the same grid
+                // (the samples computed by the same expressions, so the image
+                // is bit for bit the one without macrocells).
+                let cells_on = cell_span(leaf, o, d, inv_d, t, t_exit);
+                if (cells_on.x > cells_on.y) {
+                    // Every cell it crosses is empty: only the value at the
+                    // exit is needed, for the next leaf's first segment.
+                    k = 0xFFFFFFFFu;
+                    skip_first = true;
+                } else {
+                    var k0 = floor((cells_on.x - t) / h);
+                    if (k0 >= 1.0 && t + k0 * h > cells_on.x) {
+                        k0 = k0 - 1.0;
+                    }
+                    if (k0 >= 1.0) {
+                        k = u32(k0);
+                        skip_first = true;
+                    }
+                    var k1 = ceil((cells_on.y - t) / h);
+                    if (t + k1 * h < cells_on.y) {
+                        k1 = k1 + 1.0;
+                    }
+                    k_end = u32(clamp(k1, 1.0, 4.0e9));
+                }
+            }
+            if (!have_prev && !skip_first) {
                 s_prev = sample_levels(lv, blend, o + d * t);
                 have_prev = true;
                 n_samples = n_samples + 1u;
             }
-            var tc = t;
-            // Samples fall at t + k·h (and where the leaf ends or a tool's
-            // boundary lies): a skip over empty macrocells lands on them.
-            var k = 1u;
-            // Where the ray leaves the macrocell last looked up (it is
-            // looked up again only once the ray has left it).
-            var t_cell = -1.0;
             loop {
-                if (MACROCELLS && !blend && tc >= t_cell) {
-                    // Every segment inside an empty cell adds exactly
-                    // nothing: go to its last sample there.
-                    let mc = macrocell(leaf, o, d, inv_d, t, h, tc, t_exit);
-                    t_cell = mc.x;
-                    if (mc.y >= f32(k)) {
-                        let kn = u32(mc.y);
-                        tc = t + f32(kn) * h;
-                        s_prev = sample_levels(lv, blend, o + d * tc);
-                        n_samples = n_samples + 1u;
-                        k = kn + 1u;
-                        if (tc >= t_exit) {
-                            break;
-                        }
-                    }
-                }
                 let tk = t + f32(k) * h;
                 var tn = min(tk, t_exit);
                 if (HAS_BREAKS) {
                     tn = min(tn, next_break(&ray, tc));
                 }
+                let at_k = k;
                 if (tn >= tk) {
                     k = k + 1u;
                 }
+                if (MACROCELLS && at_k >= k_end) {
+                    // Past the last non-empty cell: next, the exit.
+                    k = 0xFFFFFFFFu;
+                }
                 let s = sample_levels(lv, blend, o + d * tn);
                 n_samples = n_samples + 1u;
+                if (MACROCELLS && skip_first) {
+                    skip_first = false;
+                    have_prev = true;
+                    s_prev = s;
+                    tc = tn;
+                    if (tc >= t_exit) {
+                        break;
+                    }
+                    continue;
+                }
                 if (ISO) {
                     // The first crossing of the isovalue, opaque and shaded;
                     // a tool may cut it away (opacity 0) or fade it.
