@@ -44,7 +44,7 @@ override COUNT_SAMPLES: bool = false;
 // loop carries no per-sample test (on SIMD hardware a rare branch taken by
 // one lane is paid by all of them).
 fn cell_span(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
-    let voxel = frame.spacing.xyz * f32(1u << (frame.counts.y - leaf.level));
+    let voxel = frame.spacing.xyz * level_scale(leaf.level);
     let n = frame.aux.z;
     let cell = voxel * f32(frame.aux.w);
     let base = leaf.cell * f32(frame.counts.x) * voxel;
@@ -197,7 +197,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var visited = 0u; visited < MAX_NODES_PER_RAY; visited = visited + 1u) {
         let n = index[node];
         let level = n.data >> 24u;
-        let cells = f32(1u << level);
+        let cells = level_cells(level);
         let size = frame.domain.xyz / cells;
         let cell = clamp(floor(probe * cells), vec3<f32>(0.0), vec3<f32>(cells - 1.0));
         let lo = cell * size;
@@ -237,7 +237,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     && max(lod_offset(level, o + d * t), lod_offset(level, o + d * t_exit)) > 0.0;
             }
             // Sampling rate matched to the leaf's level.
-            let voxel = frame.spacing.w * f32(1u << (frame.counts.y - level));
+            let ve = frame.spacing.xyz * level_scale(level);
+            let voxel = min(min(ve.x, ve.y), ve.z);
             var h = step_factor * voxel;
             if (frame.render.w > 0.5) {
                 // L12 §4.4 Eq. 3: λ = t·sin(θ/2), the radius of the pixel's

@@ -62,6 +62,11 @@ enum Command {
         /// Memory budget of the import (MiB).
         #[arg(long, default_value_t = 2048)]
         memory_mb: usize,
+        /// Halve all three axes at every level even over thick slices (by
+        /// default the levels above anisotropic voxels halve the finer axes
+        /// first, until the voxels are near-cubic)
+        #[arg(long)]
+        isotropic_levels: bool,
         /// Raw input: X,Y,Z
         #[arg(long, value_parser = list::<usize, 3>)]
         dims: Option<[usize; 3]>,
@@ -340,6 +345,7 @@ fn run(cli: Cli) -> Result<()> {
             quantize,
             codec,
             memory_mb,
+            isotropic_levels,
             dims,
             voxel_type,
             spacing,
@@ -380,6 +386,7 @@ fn run(cli: Cli) -> Result<()> {
                 empty_below,
                 memory_mb,
                 progress: std::io::stderr().is_terminal(),
+                isotropic_levels,
             };
             let name = input.display().to_string();
             let source = match &described {

@@ -894,12 +894,14 @@ pub fn run_prediction(
     Ok(points)
 }
 
-/// One volume of `parallax bench --anisotropy`.
+/// One volume and view of `parallax bench --anisotropy`.
 #[derive(Clone, Debug)]
 pub struct AnisotropyPoint {
     pub volume: &'static str,
     pub spacing: [f64; 3],
     pub dims: [usize; 3],
+    /// "near" or "far" (the volume four times smaller on screen).
+    pub view: &'static str,
     pub accuracy: f64,
     pub rmse: f64,
     pub max_abs: f64,
@@ -910,19 +912,23 @@ pub struct AnisotropyPoint {
 /// The level-of-detail error on thick slices: the same CT-like phantom
 /// (Shepp–Logan geometry, integer values 0…1000) over the same 256 mm
 /// cube, once with isotropic 1 mm voxels (256³) and once as a clinical scan
-/// with 0.5 × 0.5 mm pixels and 4 mm slices (512 × 512 × 64), seen
-/// obliquely at 256×192, where a source voxel is about 0.6 pixels. Each is rendered at the default accuracy and at full detail
-/// (accuracy 0.01), with every other knob precise (full-precision bricks,
-/// exact interpolation, step 1/4, no early termination), and compared with
-/// its own exact integral: the difference between the two accuracies is
-/// what the level of detail costs. Writes `anisotropy.csv`.
+/// with 0.5 × 0.5 mm pixels and 4 mm slices (512 × 512 × 64; imported
+/// twice: levels that halve the finer axes first, and, for comparison,
+/// levels that halve all three), seen obliquely at 256×192, near (a source
+/// millimetre is about 0.6 pixels) and far (0.15 pixels). Each is rendered
+/// at the default accuracy, the thick slices also at full detail (accuracy
+/// 0.01), with every other knob precise (full-precision bricks, exact
+/// interpolation, step 1/4, no early termination), and compared with its
+/// own exact integral: the difference between the two accuracies is what
+/// the level of detail costs. Writes `anisotropy.csv`.
 pub fn run_anisotropy(out: &Path) -> Result<Vec<AnisotropyPoint>> {
     anisotropy_study(out, 256, [256, 192], 0.25)
 }
 
 /// [`run_anisotropy`] on a cube of `mm` millimetres (isotropic mm³ voxels
-/// and 2mm × 2mm × mm/4 of 0.5 × 0.5 × 4 mm), `size` metres tall on screen,
-/// seen at `resolution` on the 0.4 × 0.3 m window.
+/// and 2mm × 2mm × mm/4 of 0.5 × 0.5 × 4 mm), `size` metres tall on screen
+/// near and a quarter of that far, seen at `resolution` on the 0.4 × 0.3 m
+/// window.
 pub fn anisotropy_study(
     out: &Path,
     mm: usize,
@@ -940,90 +946,133 @@ pub fn anisotropy_study(
         ControlPoint::new(400.0, [0.9, 0.85, 0.7], 0.04),
         ControlPoint::new(1000.0, [1.0; 3], 0.2),
     ])?;
-    let placement = Placement {
+    let placement = |size: f64| Placement {
         center: [0.0, 0.0, 0.0],
         rotation_deg: [-70.0, 25.0, 0.0],
         size,
     };
     let view = View::window(resolution, [0.4, 0.3], [0.0, 0.0, 0.8]);
+    let views = [("near", size), ("far", size / 4.0)];
     let tmp = tempfile::tempdir()?;
     let mut points = Vec::new();
-    for (name, dims, spacing) in [
-        ("isotropic 1 mm", [mm, mm, mm], [1.0, 1.0, 1.0]),
+    let default = RenderConfig::default().accuracy;
+    // The thick slices in the octree whose levels halve every axis (before
+    // format 5, `--isotropic-levels`) and in the one whose levels halve the
+    // finer axes first.
+    // (name, isotropic levels, accuracies) of each import of a volume.
+    type Imports<'a> = &'a [(&'static str, bool, &'a [f64])];
+    let volumes: [(&str, [usize; 3], [f64; 3], Imports<'_>); 2] = [
+        (
+            "isotropic 1 mm",
+            [mm, mm, mm],
+            [1.0, 1.0, 1.0],
+            &[("isotropic 1 mm", false, &[default])],
+        ),
         (
             "0.5 x 0.5 x 4 mm slices",
             [2 * mm, 2 * mm, mm / 4],
             [0.5, 0.5, 4.0],
+            &[
+                ("0.5 x 0.5 x 4 mm slices", false, &[default, 0.01]),
+                (
+                    "0.5 x 0.5 x 4 mm slices (levels halving all axes)",
+                    true,
+                    &[default],
+                ),
+            ],
         ),
-    ] {
+    ];
+    for (vname, dims, spacing, imports) in volumes {
         let vol = Volume::from_fn(dims, spacing, VoxelType::U16, |i, j, k| {
             (1000.0 * shepp_logan([coord(i, dims[0]), coord(j, dims[1]), coord(k, dims[2])]))
                 .round() as f32
         });
-        let t = Instant::now();
-        let reference = reference::render(&vol, &tf, &placement, &view, Tolerance { abs: 1e-6 });
-        eprintln!(
-            "{name}: reference integral {:.1} s",
-            t.elapsed().as_secs_f64()
-        );
-        let db = tmp.path().join("aniso.pxo");
-        store::import(
-            &mut MemorySource::new(&vol),
-            &db,
-            name,
-            &ImportOptions {
-                encoding: BrickEncoding::F32,
-                ..Default::default()
-            },
-        )?;
-        for accuracy in [RenderConfig::default().accuracy, 0.01] {
-            let cfg = RenderConfig {
-                accuracy,
-                interpolation: parallax_common::config::Interpolation::Exact,
-                ..precise_config()
-            };
-            let (f, frame_ms) = converged_frame(&db, &tf, &placement, &view, &cfg)?;
-            let (rmse, max_abs, _) = image_error(&f.images[0], &reference);
-            let p = AnisotropyPoint {
-                volume: name,
-                spacing,
-                dims,
-                accuracy,
-                rmse,
-                max_abs,
-                bricks: f.stats.cut_leaves_with_data,
-                frame_ms,
-            };
-            eprintln!(
-                "{name:>24}, accuracy {accuracy:<5}: RMSE {rmse:.2e}, max {max_abs:.2e}, {} bricks, {frame_ms:.0} ms",
-                p.bricks
-            );
-            points.push(p);
+        let references: Vec<Vec<[f64; 4]>> = views
+            .iter()
+            .map(|&(vw, sz)| {
+                let t = Instant::now();
+                let r =
+                    reference::render(&vol, &tf, &placement(sz), &view, Tolerance { abs: 1e-6 });
+                eprintln!(
+                    "{vname}, {vw}: reference integral {:.1} s",
+                    t.elapsed().as_secs_f64()
+                );
+                r
+            })
+            .collect();
+        for &(name, isotropic_levels, accuracies) in imports {
+            let db = tmp.path().join("aniso.pxo");
+            store::import(
+                &mut MemorySource::new(&vol),
+                &db,
+                name,
+                &ImportOptions {
+                    encoding: BrickEncoding::F32,
+                    isotropic_levels,
+                    ..Default::default()
+                },
+            )?;
+            for (&(vw, sz), reference) in views.iter().zip(&references) {
+                for &accuracy in accuracies {
+                    let cfg = RenderConfig {
+                        accuracy,
+                        interpolation: parallax_common::config::Interpolation::Exact,
+                        ..precise_config()
+                    };
+                    let (f, frame_ms) = converged_frame(&db, &tf, &placement(sz), &view, &cfg)?;
+                    let (rmse, max_abs, _) = image_error(&f.images[0], reference);
+                    let p = AnisotropyPoint {
+                        volume: name,
+                        spacing,
+                        dims,
+                        view: vw,
+                        accuracy,
+                        rmse,
+                        max_abs,
+                        bricks: f.stats.cut_leaves_with_data,
+                        frame_ms,
+                    };
+                    eprintln!(
+                        "{name:>50}, {vw:>4}, accuracy {accuracy:<5}: RMSE {rmse:.2e}, max {max_abs:.2e}, {} bricks, {frame_ms:.0} ms",
+                        p.bricks
+                    );
+                    points.push(p);
+                }
+            }
         }
     }
     write_table(
         &out.join("anisotropy.csv"),
-        "volume,spacing_mm,dims,accuracy,rmse,max_abs,bricks_in_cut,frame_ms",
+        "volume,spacing_mm,dims,view,accuracy,rmse,max_abs,bricks_in_cut,frame_ms",
         points.iter().map(|p| {
             let [sx, sy, sz] = p.spacing;
             let [nx, ny, nz] = p.dims;
             format!(
-                "{},{sx}x{sy}x{sz},{nx}x{ny}x{nz},{},{:.6e},{:.6e},{},{:.1}",
-                p.volume, p.accuracy, p.rmse, p.max_abs, p.bricks, p.frame_ms
+                "{},{sx}x{sy}x{sz},{nx}x{ny}x{nz},{},{},{:.6e},{:.6e},{},{:.1}",
+                p.volume, p.view, p.accuracy, p.rmse, p.max_abs, p.bricks, p.frame_ms
             )
         }),
     )?;
-    let at_default = |v: &str| {
-        points
-            .iter()
-            .find(|p| p.volume == v && p.accuracy == RenderConfig::default().accuracy)
-            .map(|p| p.rmse)
-            .unwrap_or(f64::NAN)
-    };
-    eprintln!(
-        "anisotropic / isotropic error at the default accuracy: {:.2}",
-        at_default("0.5 x 0.5 x 4 mm slices") / at_default("isotropic 1 mm")
-    );
+    for (vw, _) in views {
+        let at_default = |v: &str| {
+            points
+                .iter()
+                .find(|p| p.volume == v && p.view == vw && p.accuracy == default)
+                .map(|p| (p.rmse, p.bricks))
+                .unwrap_or((f64::NAN, 0))
+        };
+        let iso = at_default("isotropic 1 mm");
+        let fitted = at_default("0.5 x 0.5 x 4 mm slices");
+        let all = at_default("0.5 x 0.5 x 4 mm slices (levels halving all axes)");
+        eprintln!(
+            "{vw}: thick slices / isotropic error at the default accuracy: {:.2} ({} bricks; \
+             levels halving all axes: {:.2}, {} bricks)",
+            fitted.0 / iso.0,
+            fitted.1,
+            all.0 / iso.0,
+            all.1
+        );
+    }
     Ok(points)
 }
 

@@ -1,9 +1,11 @@
 //! The spatial index of the current cut (G10 §5 "GPU cache and spatial
 //! index"): 6 × N 32-bit words, rebuilt on the CPU each frame and uploaded.
 //!
-//! Index nodes are laid out so that the eight children of a node are
-//! consecutive (the first child's index is stored; child c = first + c with
-//! c = x | y<<1 | z<<2). The six words of node i (`IndexNode`, mirrored by the
+//! Index nodes are laid out so that the children of a node are consecutive
+//! (the first child's index is stored; child c = first + c, the bits of c
+//! being the child's offset along each axis its level halves, x first:
+//! c = x | y<<1 | z<<2 for eight children, `OctreeLayout::children`). The
+//! six words of node i (`IndexNode`, mirrored by the
 //! WGSL struct `IndexNode` in `shaders/raycast.wgsl`):
 //!
 //! | word | content |
@@ -21,7 +23,7 @@
 //! its entry point. Every node keeps its data slot and range, so the ray
 //! caster can also read parent and grandparent data (G10 §5).
 
-use crate::store::NodeKey;
+use crate::store::{NodeKey, OctreeLayout};
 use anyhow::{bail, Result};
 use bytemuck::{Pod, Zeroable};
 use std::collections::HashMap;
@@ -79,7 +81,7 @@ fn some16(v: u32) -> Option<u32> {
 /// What the index needs to know about one node of the cut.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CutNode {
-    /// Whether the node is refined: its eight children are in the index too.
+    /// Whether the node is refined: its children are in the index too.
     pub refined: bool,
     /// Brick pool slot of the node's data, if resident and worth sampling.
     pub slot: Option<u32>,
@@ -88,10 +90,11 @@ pub struct CutNode {
 }
 
 /// The index of one frame, and which octree node each index node is.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct SpatialIndex {
     pub nodes: Vec<IndexNode>,
     pub keys: Vec<NodeKey>,
+    layout: OctreeLayout,
 }
 
 impl SpatialIndex {
@@ -99,7 +102,11 @@ impl SpatialIndex {
     /// and leaves) under its key; children of a refined node that are absent
     /// (outside the volume) become empty leaves. `global` is the dataset's
     /// value range, the frame of the unorm16 brick ranges.
-    pub fn build(cut: &HashMap<NodeKey, CutNode>, global: (f32, f32)) -> Result<Self> {
+    pub fn build(
+        layout: &OctreeLayout,
+        cut: &HashMap<NodeKey, CutNode>,
+        global: (f32, f32),
+    ) -> Result<Self> {
         let root = NodeKey::root();
         if !cut.contains_key(&root) {
             bail!("the cut has no root");
@@ -114,7 +121,7 @@ impl SpatialIndex {
             match cut.get(&k) {
                 Some(n) if n.refined => {
                     first_child.push(keys.len() as u32);
-                    for c in k.children() {
+                    for c in layout.children(k) {
                         keys.push(c);
                         parent.push(i as u32);
                     }
@@ -141,7 +148,7 @@ impl SpatialIndex {
         let neighbour = |k: NodeKey, axis: usize, plus: bool| -> u32 {
             let mut c = [k.x as i64, k.y as i64, k.z as i64];
             c[axis] += if plus { 1 } else { -1 };
-            let side = 1i64 << k.level;
+            let side = layout.level_cells(k.level as u32)[axis] as i64;
             if c[axis] < 0 || c[axis] >= side {
                 return NONE16;
             }
@@ -150,7 +157,7 @@ impl SpatialIndex {
                 if let Some(&i) = at.get(&n) {
                     return i;
                 }
-                match n.parent() {
+                match layout.parent(n) {
                     Some(p) => n = p,
                     None => return NONE16,
                 }
@@ -174,7 +181,11 @@ impl SpatialIndex {
                 }
             })
             .collect();
-        Ok(SpatialIndex { nodes, keys })
+        Ok(SpatialIndex {
+            nodes,
+            keys,
+            layout: *layout,
+        })
     }
 
     pub fn len(&self) -> usize {
@@ -195,11 +206,9 @@ impl SpatialIndex {
             let Some(first) = n.first_child() else {
                 return i;
             };
-            let level = n.level() + 1;
-            let scale = (1u64 << level) as f64;
-            let c: [u32; 3] =
-                std::array::from_fn(|a| ((p[a] * scale).floor() as i64).rem_euclid(2) as u32);
-            i = first + (c[0] | c[1] << 1 | c[2] << 2);
+            let cells = self.layout.level_cells(n.level() + 1);
+            let c: [u64; 3] = std::array::from_fn(|a| (p[a] * cells[a] as f64).floor() as u64);
+            i = first + self.layout.child_index(n.level(), c);
         }
     }
 }
@@ -217,20 +226,26 @@ mod tests {
         }
     }
 
+    fn octree() -> OctreeLayout {
+        OctreeLayout::new([32, 32, 32], 8)
+    }
+
+    /// A cut whose root (slot 0, values 0..max) is refined.
+    fn refined_root(max: f32) -> HashMap<NodeKey, CutNode> {
+        let root = CutNode {
+            refined: true,
+            max,
+            ..leaf(Some(0))
+        };
+        HashMap::from([(NodeKey::root(), root)])
+    }
+
     /// Root refined; child 0 refined again; others leaves.
     fn two_level_cut() -> HashMap<NodeKey, CutNode> {
-        let mut cut = HashMap::new();
+        let l = octree();
+        let mut cut = refined_root(100.0);
         let root = NodeKey::root();
-        cut.insert(
-            root,
-            CutNode {
-                refined: true,
-                slot: Some(0),
-                min: 0.0,
-                max: 100.0,
-            },
-        );
-        for (i, c) in root.children().into_iter().enumerate() {
+        for (i, c) in l.children(root).into_iter().enumerate() {
             cut.insert(
                 c,
                 CutNode {
@@ -239,7 +254,7 @@ mod tests {
                 },
             );
         }
-        for (i, c) in root.children()[0].children().into_iter().enumerate() {
+        for (i, c) in l.children(l.children(root)[0]).into_iter().enumerate() {
             cut.insert(c, leaf(if i == 7 { None } else { Some(20 + i as u32) }));
         }
         cut
@@ -247,7 +262,7 @@ mod tests {
 
     #[test]
     fn layout_pointers_and_neighbours() {
-        let idx = SpatialIndex::build(&two_level_cut(), (0.0, 100.0)).unwrap();
+        let idx = SpatialIndex::build(&octree(), &two_level_cut(), (0.0, 100.0)).unwrap();
         assert_eq!(idx.len(), 17);
         let root = idx.nodes[0];
         assert_eq!(root.parent(), None);
@@ -286,9 +301,64 @@ mod tests {
                 max: 0.456,
             },
         );
-        let idx = SpatialIndex::build(&cut, (0.0, 1.0)).unwrap();
+        let idx = SpatialIndex::build(&octree(), &cut, (0.0, 1.0)).unwrap();
         let (lo, hi) = idx.nodes[0].range((0.0, 1.0));
         assert!(lo <= 0.123 && lo > 0.123 - 2e-5);
         assert!((0.456..0.456 + 2e-5).contains(&hi));
+    }
+
+    /// Thick slices: the root halves all axes, its children x and y only.
+    #[test]
+    fn anisotropic_levels_index_and_descend() {
+        let l = OctreeLayout::for_spacing([32, 32, 16], 8, [1.0, 1.0, 2.0]);
+        assert_eq!(l.levels, 3);
+        assert_eq!(l.split(1), [true; 3]);
+        assert_eq!(l.split(2), [true, true, false]);
+        let mut cut = refined_root(10.0);
+        let root = NodeKey::root();
+        let kids = l.children(root);
+        assert_eq!(kids.len(), 8);
+        for (i, c) in kids.iter().enumerate() {
+            cut.insert(
+                *c,
+                CutNode {
+                    refined: i == 5,
+                    ..leaf(Some(1 + i as u32))
+                },
+            );
+        }
+        // Node 5 is level-1 (1, 0, 1): four children on level 2 (2..3, 0..1, 1).
+        let grand = l.children(kids[5]);
+        assert_eq!(grand.len(), 4);
+        assert_eq!(grand[3], NodeKey::new(2, 3, 1, 1));
+        for (i, c) in grand.iter().enumerate() {
+            cut.insert(*c, leaf(Some(20 + i as u32)));
+        }
+        let idx = SpatialIndex::build(&l, &cut, (0.0, 100.0)).unwrap();
+        assert_eq!(idx.len(), 1 + 8 + 4);
+        assert_eq!(idx.nodes[6].first_child(), Some(9));
+        for (i, g) in grand.iter().enumerate() {
+            assert_eq!(idx.keys[9 + i], *g);
+            assert_eq!(idx.nodes[9 + i].parent(), Some(6));
+        }
+        // Descent: level-2 cells are 1/4 wide in x and y, 1/2 in z.
+        assert_eq!(idx.leaf_at([0.55, 0.1, 0.6]), 9);
+        assert_eq!(idx.leaf_at([0.8, 0.1, 0.9]), 10);
+        assert_eq!(idx.leaf_at([0.8, 0.3, 0.9]), 12);
+        assert_eq!(idx.leaf_at([0.3, 0.3, 0.9]), 5);
+        // Level-2 (3, 1, 1): +x is outside the domain, −x is (2, 1, 1),
+        // +y is level-2 (3, 2, 1), not in the index → its parent (1, 1, 1);
+        // −z is level-2 (3, 1, 0) → level-1 (1, 0, 0).
+        assert_eq!(idx.nodes[12].neighbour(0, true), None);
+        assert_eq!(idx.nodes[12].neighbour(0, false), Some(11));
+        assert_eq!(
+            idx.keys[idx.nodes[12].neighbour(1, true).unwrap() as usize],
+            NodeKey::new(1, 1, 1, 1)
+        );
+        assert_eq!(
+            idx.keys[idx.nodes[12].neighbour(2, false).unwrap() as usize],
+            NodeKey::new(1, 1, 0, 0)
+        );
+        assert_eq!(idx.nodes[12].neighbour(2, true), None);
     }
 }

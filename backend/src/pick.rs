@@ -70,7 +70,7 @@ impl PickVolume {
             .unwrap_or(0);
         let dims = layout.level_dims(level);
         let [nx, ny, nz] = dims;
-        let scale = layout.voxel_scale(level) as f64;
+        let scale = layout.voxel_scale(level);
         let spacing = db.header.info.spacing;
         let nb = layout.level_bricks(level);
         let b = layout.brick;
@@ -151,7 +151,7 @@ impl PickVolume {
         let grid = Volume::new(
             VolumeInfo {
                 dims,
-                spacing: spacing.map(|s| s * scale),
+                spacing: std::array::from_fn(|a| spacing[a] * scale[a] as f64),
                 voxel_type: VoxelType::F32,
             },
             data,

@@ -449,7 +449,7 @@ impl Renderer {
 
         let t = Instant::now();
         let s = &self.db.summary;
-        let index = SpatialIndex::build(&cut.cut, (s.value_min, s.value_max))?;
+        let index = SpatialIndex::build(self.db.layout(), &cut.cut, (s.value_min, s.value_max))?;
         stats.index_ms = ms(t);
 
         let scene = self.geometry(placement);

@@ -93,6 +93,11 @@ fn full_precision_round_trip_overlaps_and_averages() {
     let db = OctreeDb::open(&out).unwrap();
     let l = *db.layout();
     assert_eq!(l.levels, 5); // 8·2^4 = 128 ≥ 70
+                             // 0.5 × 0.7 × 1.3: the level above the source halves x and y only
+                             // (1 × 1.4 × 1.3), every level above it all three.
+    assert_eq!(l.split(4), [true, true, false]);
+    assert_eq!(l.split(3), [true; 3]);
+    assert_eq!(l.level_dims(3), [35, 23, 37]);
     assert_eq!(r.nodes, l.node_count());
     assert_eq!(db.header.info.spacing, [0.5, 0.7, 1.3]);
     assert_eq!(db.header.info.voxel_type, VoxelType::I16);
@@ -103,20 +108,21 @@ fn full_precision_round_trip_overlaps_and_averages() {
     let leaf = level_grid(&db, l.leaf_level());
     assert_eq!(leaf, vol.data);
 
-    // Every inner level is the 2×2×2 average of the level below (over the
-    // voxels that exist at odd edges).
+    // Every inner level is the 2×2×2 average of the level below along the
+    // axes it halves (over the voxels that exist at odd edges).
     let mut fine = leaf;
     for level in (0..l.leaf_level()).rev() {
         let coarse = level_grid(&db, level);
         let (fd, cd) = (l.level_dims(level + 1), l.level_dims(level));
+        let f = l.split(level + 1).map(|s| 1 + s as usize);
         for k in 0..cd[2] {
             for j in 0..cd[1] {
                 for i in 0..cd[0] {
                     let (mut sum, mut n) = (0f64, 0);
-                    for dk in 0..2 {
-                        for dj in 0..2 {
-                            for di in 0..2 {
-                                let (x, y, z) = (2 * i + di, 2 * j + dj, 2 * k + dk);
+                    for dk in 0..f[2] {
+                        for dj in 0..f[1] {
+                            for di in 0..f[0] {
+                                let (x, y, z) = (f[0] * i + di, f[1] * j + dj, f[2] * k + dk);
                                 if x < fd[0] && y < fd[1] && z < fd[2] {
                                     sum += fine[(z * fd[1] + y) * fd[0] + x] as f64;
                                     n += 1;
@@ -356,6 +362,94 @@ fn single_voxel_and_thin_volumes_import() {
         );
         level_grid(&db, 0);
     }
+}
+
+/// Format 5 records which axes each level halves. A file of format 4 (no
+/// such record: every level halves all three axes) still opens as that
+/// octree: made here by rewriting a fresh import with levels halving all
+/// axes into format 4's header (same length, so every brick stays where it
+/// is), it reads brick for brick like the file it came from, while a
+/// default import of the same thick slices halves the finer axes first.
+#[test]
+fn format_four_files_open_as_octrees_halving_every_axis() {
+    use parallax_backend::store::format::{bincode_config, HeaderV4, LayoutV4, PREAMBLE_LEN};
+    use parallax_backend::store::OctreeLayout;
+    let dims = [40, 36, 6];
+    let vol = Volume::from_fn(dims, [0.5, 0.5, 3.0], VoxelType::U16, |i, j, k| {
+        ((i * 7 + j * 13 + k * 101) % 300) as f32
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let (iso_path, fitted_path, v4_path) = (
+        dir.path().join("iso.pxo"),
+        dir.path().join("fitted.pxo"),
+        dir.path().join("v4.pxo"),
+    );
+    let opts = ImportOptions {
+        brick: 8,
+        ..Default::default()
+    };
+    import(
+        &vol,
+        &iso_path,
+        &ImportOptions {
+            isotropic_levels: true,
+            ..opts.clone()
+        },
+    );
+    import(&vol, &fitted_path, &opts);
+    let iso = OctreeDb::open(&iso_path).unwrap();
+    let fitted = OctreeDb::open(&fitted_path).unwrap();
+    assert_eq!(*iso.layout(), OctreeLayout::new(dims, 8));
+    assert_eq!(
+        *fitted.layout(),
+        OctreeLayout::for_spacing(dims, 8, [0.5, 0.5, 3.0])
+    );
+    assert_ne!(iso.layout(), fitted.layout());
+    // 0.5 × 0.5 × 3: x and y are halved twice (2 × 2 × 3 mm) before z.
+    assert_eq!(
+        fitted.layout().split(fitted.layout().leaf_level()),
+        [true, true, false]
+    );
+    assert_eq!(fitted.layout().level_dims(1), [10, 9, 6]);
+    info::verify(&fitted).unwrap();
+
+    // Format 4's header: the layout without its split record, padded to the
+    // same length.
+    let mut b = std::fs::read(&iso_path).unwrap();
+    let len = u32::from_le_bytes(b[12..16].try_into().unwrap()) as usize;
+    let h = iso.header.clone();
+    let old = HeaderV4 {
+        info: h.info,
+        layout: LayoutV4 {
+            dims: h.layout.dims,
+            brick: h.layout.brick,
+            levels: h.layout.levels,
+        },
+        encoding: h.encoding,
+        empty_below: h.empty_below,
+        source: h.source,
+    };
+    let mut enc = bincode::serde::encode_to_vec(&old, bincode_config()).unwrap();
+    assert!(enc.len() < len);
+    enc.resize(len, 0);
+    b[8..12].copy_from_slice(&4u32.to_le_bytes());
+    b[16..20].copy_from_slice(&crc32fast::hash(&enc).to_le_bytes());
+    b[PREAMBLE_LEN..PREAMBLE_LEN + len].copy_from_slice(&enc);
+    std::fs::write(&v4_path, b).unwrap();
+    assert_eq!(format_version(&v4_path), 4);
+
+    let v4 = OctreeDb::open(&v4_path).unwrap();
+    assert_eq!(v4.layout(), iso.layout());
+    assert_eq!(v4.nodes.len(), iso.nodes.len());
+    for n in &iso.nodes {
+        assert_eq!(
+            v4.read_brick(n.key).unwrap(),
+            iso.read_brick(n.key).unwrap(),
+            "brick {}",
+            n.key
+        );
+    }
+    info::verify(&v4).unwrap();
 }
 
 /// The format version in a `.pxo` file's preamble.

@@ -108,14 +108,14 @@ impl Pool {
                 assert_eq!(self.slots.get(&s), Some(k), "slot {s} of {k}");
                 assert!(used.insert(s), "slot {s} twice");
             }
-            if let Some(p) = k.parent() {
+            if let Some(p) = db.layout().parent(*k) {
                 assert!(
                     f.cut.get(&p).is_some_and(|p| p.refined),
                     "{k}: parent not refined"
                 );
             }
             if n.refined {
-                for c in k.children() {
+                for c in db.layout().children(*k) {
                     if !db.layout().contains(c) {
                         continue;
                     }
@@ -130,8 +130,12 @@ impl Pool {
         assert!(f.cut.contains_key(&NodeKey::root()));
         assert_eq!(f.stats.nodes, f.cut.len());
         assert_eq!(f.stats.uploaded, f.uploads.len());
-        let index =
-            SpatialIndex::build(&f.cut, (db.summary.value_min, db.summary.value_max)).unwrap();
+        let index = SpatialIndex::build(
+            db.layout(),
+            &f.cut,
+            (db.summary.value_min, db.summary.value_max),
+        )
+        .unwrap();
         let refined = f.cut.values().filter(|n| n.refined).count();
         assert_eq!(index.len(), 1 + 8 * refined);
     }
@@ -509,7 +513,7 @@ fn feedback_keeps_the_invisible_half_coarse() {
     assert_eq!(full.stats.nodes, 585);
     // The renderer saw only the leaves in the left half (x < ½ of the domain).
     let left = |k: &NodeKey| (k.x as f64 + 0.5) / (1u64 << k.level) as f64 <= 0.5;
-    let mut index = SpatialIndex::build(&full.cut, range).unwrap();
+    let mut index = SpatialIndex::build(db.layout(), &full.cut, range).unwrap();
     let mut frame = full;
     for round in 0..3 {
         let words: Vec<u32> = index
@@ -540,7 +544,7 @@ fn feedback_keeps_the_invisible_half_coarse() {
             assert_eq!(f.stats.visible, 1 + 4 + 32 + 256);
             assert!(f.stats.nodes < frame.stats.nodes);
         }
-        index = SpatialIndex::build(&f.cut, range).unwrap();
+        index = SpatialIndex::build(db.layout(), &f.cut, range).unwrap();
         frame = f;
     }
     // The same feedback with culling off changes nothing.

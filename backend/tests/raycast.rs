@@ -113,7 +113,7 @@ fn measure(
     let (lo, hi) = (range.0 as f64, range.1 as f64);
     let table = PreintTable::new(f, lo, hi, PreintTable::suggested_bins(lo, hi, true)).unwrap();
     let gtf = TfTable::new(gpu, &table, f.max_importance());
-    let index = SpatialIndex::build(cut, range).unwrap();
+    let index = SpatialIndex::build(s.db.layout(), cut, range).unwrap();
     let sc = scene(&s.db);
     let view = View::window([40, 32], [0.4, 0.32], [0.02, 0.01, 0.8]);
     let settings = RenderSettings {
@@ -236,7 +236,7 @@ fn traversal_covers_every_path_exactly_once() {
     let table = PreintTable::new(&f, 0.0, 255.0, 255).unwrap();
     let gtf = TfTable::new(&gpu, &table, f.max_importance());
     let (cut, pool) = full_cut(&gpu, &db, true);
-    let index = SpatialIndex::build(&cut, (100.0, 100.0)).unwrap();
+    let index = SpatialIndex::build(db.layout(), &cut, (100.0, 100.0)).unwrap();
     for rot in [
         [0.0, 0.0, 0.0],
         [20.0, 35.0, 0.0],

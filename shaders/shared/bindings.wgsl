@@ -44,6 +44,7 @@ struct GpuFrame {
     tf_offsets: array<vec4<u32>, 8>,  // pyramid level offsets (32)
     tf_mids: vec4<u32>,   // offset of the bin midpoint values in a table part, 0, 0, 0
     lod: vec4<f32>,       // multilevel sampling: accuracy (pixels per voxel), light field s0 (m), tan(Φ/2), light field (1) or not (0)
+    splits: vec4<u32>,    // per axis, the levels that halve it (bit l: level l against l − 1), 0
 }
 
 // A tool's constant parameters (their meaning is the enhancer's: see
@@ -79,3 +80,28 @@ struct Slot {
 @group(0) @binding(10) var<storage, read_write> prediction: array<f32>;
 // Samples taken this frame (COUNT_SAMPLES), a 64-bit count: low, high.
 @group(0) @binding(11) var<storage, read_write> counters: array<atomic<u32>, 4>;
+
+// The octree's levels (backend/src/store/layout.rs): level l halves axis a
+// against level l − 1 where bit l of frame.splits[a] is set (all three in
+// an isotropic octree; over thick slices the finer axes first).
+
+// Which axes `level` halves against level − 1 (1: halved).
+fn level_split(level: u32) -> vec3<u32> {
+    return (frame.splits.xyz >> vec3<u32>(level)) & vec3<u32>(1u);
+}
+
+// Halvings of each axis from the root down to `level`.
+fn level_halvings(level: u32) -> vec3<u32> {
+    let upto = (2u << level) - 1u;
+    return countOneBits(frame.splits.xyz & vec3<u32>(upto));
+}
+
+// Nodes along each axis of the root's domain at `level`.
+fn level_cells(level: u32) -> vec3<f32> {
+    return vec3<f32>(vec3<u32>(1u) << level_halvings(level));
+}
+
+// Source voxels per level-`level` voxel along each axis.
+fn level_scale(level: u32) -> vec3<f32> {
+    return vec3<f32>(vec3<u32>(1u) << (countOneBits(frame.splits.xyz) - level_halvings(level)));
+}

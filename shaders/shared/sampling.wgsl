@@ -86,8 +86,7 @@ fn tricubic(o: vec3<i32>, x: vec3<f32>) -> f32 {
 }
 
 fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
-    let scale = f32(1u << (frame.counts.y - leaf.level));
-    let voxel = frame.spacing.xyz * scale;
+    let voxel = frame.spacing.xyz * level_scale(leaf.level);
     let side = f32(frame.pool.w);
     let local = clamp(p / voxel - leaf.cell * f32(frame.counts.x) + vec3<f32>(OVERLAP - 0.5),
                       vec3<f32>(0.0), vec3<f32>(side - 1.0));
@@ -141,7 +140,7 @@ fn partial(a: f32, b: f32, c: f32, h: f32) -> f32 {
 }
 
 fn gradient(leaf: Leaf, p: vec3<f32>) -> vec3<f32> {
-    let h = frame.spacing.xyz * f32(1u << (frame.counts.y - leaf.level));
+    let h = frame.spacing.xyz * level_scale(leaf.level);
     if (NO_DATA) {
         let c = sample_brick(leaf, p);
         let ex = vec3<f32>(h.x, 0.0, 0.0);
@@ -189,12 +188,14 @@ fn levels_of(leaf: Leaf, n: IndexNode) -> Levels {
         return lv;
     }
     let pn = index[pi];
-    lv.up = Leaf(pi, leaf.level - 1u, floor(leaf.cell * 0.5), pn.data & NO_SLOT);
+    lv.up = Leaf(pi, leaf.level - 1u, floor(leaf.cell / vec3<f32>(level_split(leaf.level) + 1u)),
+                 pn.data & NO_SLOT);
     let gi = pn.tree & 0xFFFFu;
     if (lv.up.slot == NO_SLOT || gi == NONE16) {
         return lv;
     }
-    lv.up2 = Leaf(gi, leaf.level - 2u, floor(leaf.cell * 0.25), index[gi].data & NO_SLOT);
+    lv.up2 = Leaf(gi, leaf.level - 2u, floor(lv.up.cell / vec3<f32>(level_split(leaf.level - 1u) + 1u)),
+                  index[gi].data & NO_SLOT);
     return lv;
 }
 
@@ -204,8 +205,8 @@ fn level_voxel(level: u32) -> f32 {
     if (level >= frame.counts.y) {
         return frame.spacing.w;
     }
-    let s = frame.spacing.xyz;
-    return f32(1u << (frame.counts.y - level)) * max(max(s.x, s.y), s.z);
+    let e = frame.spacing.xyz * level_scale(level);
+    return max(max(e.x, e.y), e.z);
 }
 
 // How many levels coarser than `level` the view needs the point p: log2 of

@@ -11,9 +11,12 @@ fn descend(start: u32, u: vec3<f32>) -> u32 {
         if (first == NONE16) {
             break;
         }
+        // The child's offset along each axis its level halves, packed x
+        // first (backend/src/index.rs).
         let level = (n.data >> 24u) + 1u;
-        let c = vec3<u32>(floor(u * f32(1u << level))) & vec3<u32>(1u);
-        i = first + (c.x | (c.y << 1u) | (c.z << 2u));
+        let s = level_split(level);
+        let c = vec3<u32>(floor(u * level_cells(level))) & s;
+        i = first + (c.x | (c.y << s.x) | (c.z << (s.x + s.y)));
     }
     return i;
 }

@@ -107,8 +107,10 @@ mod tests {
                 ..data(0)
             },
         );
-        let kids = root.children();
-        for (i, c) in kids.into_iter().enumerate() {
+        let l = crate::store::OctreeLayout::new([32, 32, 32], 8);
+        let ch = |k: NodeKey| l.children(k);
+        let kids = ch(root);
+        for (i, c) in kids.iter().copied().enumerate() {
             cut.insert(
                 c,
                 CutNode {
@@ -117,7 +119,7 @@ mod tests {
                 },
             );
         }
-        for (i, c) in kids[0].children().into_iter().enumerate() {
+        for (i, c) in ch(kids[0]).into_iter().enumerate() {
             cut.insert(
                 c,
                 if i == 7 {
@@ -130,7 +132,7 @@ mod tests {
                 },
             );
         }
-        for c in kids[1].children() {
+        for c in ch(kids[1]) {
             cut.insert(
                 c,
                 CutNode {
@@ -139,24 +141,24 @@ mod tests {
                 },
             );
         }
-        let idx = SpatialIndex::build(&cut, (0.0, 1.0)).unwrap();
+        let idx = SpatialIndex::build(&l, &cut, (0.0, 1.0)).unwrap();
         let at = |k: NodeKey| idx.keys.iter().position(|&x| x == k).unwrap();
         let mut fb = vec![0u32; idx.len()];
-        fb[at(kids[0].children()[3])] = 1;
+        fb[at(ch(kids[0])[3])] = 1;
         let vis = Visibility::from_feedback(&idx, &fb);
         assert!(!vis.is_invisible(root));
         assert!(!vis.is_invisible(kids[0]));
-        assert!(!vis.is_invisible(kids[0].children()[3]));
-        assert!(vis.is_invisible(kids[0].children()[2]));
+        assert!(!vis.is_invisible(ch(kids[0])[3]));
+        assert!(vis.is_invisible(ch(kids[0])[2]));
         // empty leaf and a subtree of empty leaves: no evidence either way
-        assert!(!vis.is_invisible(kids[0].children()[7]));
+        assert!(!vis.is_invisible(ch(kids[0])[7]));
         assert!(!vis.is_invisible(kids[1]));
         // leaves with data never traversed
         for c in &kids[2..] {
             assert!(vis.is_invisible(*c));
         }
         // not in the index: visible
-        assert!(!vis.is_invisible(kids[2].children()[0]));
+        assert!(!vis.is_invisible(ch(kids[2])[0]));
         assert_eq!(vis.visible, 3);
         // a short feedback array: missing entries are zero
         let vis = Visibility::from_feedback(&idx, &fb[..2]);

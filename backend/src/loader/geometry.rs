@@ -29,37 +29,41 @@ impl Geometry {
     }
 
     /// The node's region of the volume, [lo, hi] in volume space (data
-    /// units): brick · 2^(L−l) · spacing · [x, x+1], clamped to the extent.
+    /// units): brick · scale · spacing · [x, x+1] along each axis (scale:
+    /// source voxels per level voxel), clamped to the extent.
     pub fn node_box(&self, key: NodeKey) -> (DVec3, DVec3) {
-        let span = (self.layout.brick as f64) * self.layout.voxel_scale(key.level as u32) as f64;
+        let scale = self.layout.voxel_scale(key.level as u32);
         let c = [key.x, key.y, key.z];
-        let lo: [f64; 3] =
-            std::array::from_fn(|a| (c[a] as f64 * span * self.spacing[a]).min(self.extent[a]));
-        let hi: [f64; 3] = std::array::from_fn(|a| {
-            ((c[a] as f64 + 1.0) * span * self.spacing[a]).min(self.extent[a])
-        });
+        let span = |a: usize| (self.layout.brick * scale[a]) as f64 * self.spacing[a];
+        let lo: [f64; 3] = std::array::from_fn(|a| (c[a] as f64 * span(a)).min(self.extent[a]));
+        let hi: [f64; 3] =
+            std::array::from_fn(|a| ((c[a] as f64 + 1.0) * span(a)).min(self.extent[a]));
         (DVec3::from(lo), DVec3::from(hi))
     }
 
     /// The size of a level-`level` voxel that refinement compares with a
     /// pixel, in data units: its real extent, the longest edge
-    /// 2^(L−l) · max(spacing), above the leaves; a leaf's finest edge,
+    /// max(scale · spacing), above the leaves; a leaf's finest edge,
     /// min(spacing), at the leaves (they cannot be refined; the figure only
     /// reports how closely they are seen).
     ///
-    /// Every level halves all three axes, so on thick slices (a CT of
-    /// 0.5 × 0.5 × 4 mm) the first coarser level has 8 mm slices: sized by
-    /// its finest edge (1 mm) it would pass for a pixel-sized voxel and blur
-    /// the slices twice as wide again (RMSE 4e-2 against 2e-4 at full
-    /// detail, `parallax bench --anisotropy`); sized by its longest it is
-    /// refined wherever those 8 mm would be seen.
+    /// On thick slices (a CT of 0.5 × 0.5 × 4 mm) sizing a coarse voxel by
+    /// its finest edge would let it pass for a pixel-sized voxel and blur
+    /// the slices (RMSE 4e-2 against 2e-4 at full detail, `parallax bench
+    /// --anisotropy`); sized by its longest it is refined wherever that edge
+    /// would be seen. The levels of `OctreeLayout::for_spacing` halve the
+    /// finer axes first, so above the source they have 1 × 1 × 4 mm voxels
+    /// (4 mm) where levels halving every axis have 1 × 1 × 8 mm (8 mm): a
+    /// view in which 4 mm is under a pixel is served a level coarser.
     pub fn voxel_len(&self, level: u32) -> f64 {
         let fold = |f: fn(f64, f64) -> f64, init| self.spacing.iter().cloned().fold(init, f);
         if level >= self.layout.leaf_level() {
-            fold(f64::min, f64::INFINITY)
-        } else {
-            self.layout.voxel_scale(level) as f64 * fold(f64::max, 0.0)
+            return fold(f64::min, f64::INFINITY);
         }
+        let scale = self.layout.voxel_scale(level);
+        (0..3)
+            .map(|a| scale[a] as f64 * self.spacing[a])
+            .fold(0.0, f64::max)
     }
 }
 

@@ -370,14 +370,15 @@ impl Loader {
                 b.stats.culled_invisible += 1;
                 continue;
             }
-            if index_nodes + 8 > MAX_INDEX_NODES {
+            let kids = self.geom.layout.child_count(key.level as u32);
+            if index_nodes + kids > MAX_INDEX_NODES {
                 // The spatial index addresses nodes with 16 bits.
                 b.stats.adequate = false;
                 b.stats.held_back.insert(HeldBack::IndexNodes);
                 continue;
             }
             if self.refine(key, empty, &frame, &mut b, &mut heap) {
-                index_nodes += 8;
+                index_nodes += kids;
             } else {
                 b.stats.adequate = false;
             }
@@ -527,7 +528,7 @@ impl Loader {
         let layout = self.geom.layout;
         let mut kids: Vec<(NodeKey, NodeClass)> = Vec::with_capacity(8);
         let (mut resident, mut cached, mut missing) = (0usize, Vec::new(), Vec::new());
-        for ch in key.children() {
+        for ch in layout.children(key) {
             if !layout.contains(ch) {
                 continue;
             }
@@ -727,7 +728,7 @@ mod tests {
             },
         );
         let root = NodeKey::root();
-        let kids = root.children();
+        let kids = db.layout().children(root);
         let far = |x| NodeKey::new(2, x, 3, 3);
         // Allocation order is recency order: child 1 oldest, then two
         // unrelated bricks, then children 2..7, then the root.
@@ -760,7 +761,7 @@ mod tests {
         // The root is refined with every child on the GPU: child 0 uploaded
         // into a slot freed by an unrelated brick, the others kept.
         assert!(f.cut[&root].refined);
-        for k in kids {
+        for &k in &kids {
             assert!(f.cut[&k].slot.is_some(), "{k}");
         }
         assert_eq!(

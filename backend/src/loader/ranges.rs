@@ -50,7 +50,7 @@ impl SubtreeRanges {
                     for x in 0..n[0] as u32 {
                         let key = NodeKey::new(l as u8, x, y, z);
                         let mut acc = r.ranges[r.index(key)];
-                        for c in key.children() {
+                        for c in layout.children(key) {
                             if layout.contains(c) {
                                 let cr = r.ranges[r.index(c)];
                                 acc = [acc[0].min(cr[0]), acc[1].max(cr[1])];

@@ -868,7 +868,7 @@ impl Raycaster {
         let rt = pl.rotation().transpose();
         let col = |c: glam::DVec3| [c.x as f32, c.y as f32, c.z as f32, 0.0];
         let l = &scene.layout;
-        let root = (l.brick << l.leaf_level()) as f64;
+        let root = l.root_voxels().map(|v| v as f64);
         let sp = scene.spacing;
         let mut tf_offsets = [[0u32; 4]; 8];
         for (k, &o) in tf.layout.level_offsets.iter().enumerate() {
@@ -886,9 +886,9 @@ impl Raycaster {
             ],
             extent: [ext[0] as f32, ext[1] as f32, ext[2] as f32, 0.0],
             domain: [
-                (root * sp[0]) as f32,
-                (root * sp[1]) as f32,
-                (root * sp[2]) as f32,
+                (root[0] * sp[0]) as f32,
+                (root[1] * sp[1]) as f32,
+                (root[2] * sp[2]) as f32,
                 0.0,
             ],
             spacing: [
@@ -906,7 +906,7 @@ impl Raycaster {
             render: [
                 s.step_factor,
                 s.early_termination,
-                (0.01 / root) as f32,
+                (0.01 / root.iter().cloned().fold(0.0, f64::max)) as f32,
                 if s.adaptive_step { 1.0 } else { 0.0 },
             ],
             light: [0.35, 0.65, 0.25, 24.0],
@@ -936,6 +936,7 @@ impl Raycaster {
                     [m.accuracy, s0, tan_half, lf]
                 }
             },
+            splits: [l.splits[0], l.splits[1], l.splits[2], 0],
         }
     }
 }

@@ -56,6 +56,9 @@ pub struct GpuFrame {
     /// Multilevel sampling: accuracy (pixels per voxel), light field s0
     /// (m), tan(Φ/2), light field (1) or not (0).
     pub lod: [f32; 4],
+    /// The octree's split masks per axis (`OctreeLayout::splits`: bit l set
+    /// where level l halves the axis), 0.
+    pub splits: [u32; 4],
 }
 
 /// WGSL `ToolParams`: one tool's constant parameters (meaning per enhancer,

@@ -418,7 +418,7 @@ mod tests {
             GpuFrame,
             [
                 rt0, rt1, rt2, center, extent, domain, spacing, tf, render, light, counts, pool,
-                optics, aux, iso, predict, tf_offsets, tf_mids, lod
+                optics, aux, iso, predict, tf_offsets, tf_mids, lod, splits
             ]
         );
         check!("IndexNode", IndexNode, [tree, data, range, nx, ny, nz]);

@@ -28,10 +28,14 @@ pub const FOOTER_MAGIC: [u8; 8] = *b"PXOEND\0\0";
 /// builds refuse the file by its version rather than misread a brick);
 /// format 4 appends each brick's macrocell ranges to its blob, under its
 /// checksum (`cells`: two bytes a cell; formats 1–3 get them computed when
-/// a brick is uploaded).
-pub const VERSION: u32 = 4;
+/// a brick is uploaded); format 5 records which axes each level halves
+/// (`OctreeLayout::splits`: levels over thick slices halve only the finer
+/// axes; formats 1–4 are isotropic octrees).
+pub const VERSION: u32 = 5;
 /// The first format whose bricks carry their macrocell ranges.
 pub const CELLS_VERSION: u32 = 4;
+/// The first format whose levels may halve only some axes.
+pub const SPLITS_VERSION: u32 = 5;
 /// The oldest format read.
 pub const OLDEST_VERSION: u32 = 1;
 /// Bytes before the header: magic, version, header length, header CRC.
@@ -56,6 +60,50 @@ pub struct Header {
     pub empty_below: Option<f32>,
     /// Name of the file the database was imported from.
     pub source: String,
+}
+
+/// The layout as formats 1–4 store it: every level halves all three axes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LayoutV4 {
+    pub dims: [usize; 3],
+    pub brick: usize,
+    pub levels: u32,
+}
+
+/// The header of formats 1–4.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HeaderV4 {
+    pub info: VolumeInfo,
+    pub layout: LayoutV4,
+    pub encoding: BrickEncoding,
+    pub empty_below: Option<f32>,
+    pub source: String,
+}
+
+impl HeaderV4 {
+    /// The same header in this build's terms (an isotropic octree). A
+    /// level count out of range is kept as it is, for the header check to
+    /// name it.
+    pub fn upgrade(self) -> Header {
+        let l = self.layout;
+        let all = if (1..super::layout::MAX_LEVELS).contains(&l.levels) {
+            ((1u64 << l.levels) - 2) as u32
+        } else {
+            0
+        };
+        Header {
+            info: self.info,
+            layout: OctreeLayout {
+                dims: l.dims,
+                brick: l.brick,
+                levels: l.levels,
+                splits: [all; 3],
+            },
+            encoding: self.encoding,
+            empty_below: self.empty_below,
+            source: self.source,
+        }
+    }
 }
 
 /// One node of the octree, stored or empty.

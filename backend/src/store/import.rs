@@ -6,7 +6,9 @@
 //! soon as the window holds every slice a row of bricks needs (overlap
 //! included), the row is cut into bricks, encoded in parallel and written.
 //! Every pair of slices a level receives is averaged 2×2×2 into one slice of
-//! the next coarser level, so all levels advance together and memory is
+//! the next coarser level (only along the axes that level halves: over thick
+//! slices the levels above the source halve x and y alone, and every slice
+//! goes up on its own), so all levels advance together and memory is
 //! bounded by the windows: Σ_l (B+5)·nx_l·ny_l values, whatever the depth of
 //! the volume. Nothing else of the volume is held.
 
@@ -35,6 +37,10 @@ pub struct ImportOptions {
     pub memory_mb: usize,
     /// Show a progress bar (only drawn when stderr is a terminal).
     pub progress: bool,
+    /// Halve all three axes at every level, whatever the voxel spacing
+    /// (the octree of formats 1–4; otherwise levels over thick slices halve
+    /// only the finer axes, `OctreeLayout::for_spacing`).
+    pub isotropic_levels: bool,
 }
 
 impl Default for ImportOptions {
@@ -46,6 +52,7 @@ impl Default for ImportOptions {
             empty_below: None,
             memory_mb: 2048,
             progress: false,
+            isotropic_levels: false,
         }
     }
 }
@@ -88,7 +95,11 @@ pub fn import(
             bail!("--empty-below {t}: must be a finite value");
         }
     }
-    let layout = OctreeLayout::new(info.dims, opts.brick);
+    let layout = if opts.isotropic_levels {
+        OctreeLayout::new(info.dims, opts.brick)
+    } else {
+        OctreeLayout::for_spacing(info.dims, opts.brick, info.spacing)
+    };
     let need = memory_needed(&layout);
     if need > opts.memory_mb as u64 * (1 << 20) {
         bail!(
@@ -210,8 +221,10 @@ struct Level {
     first: usize,
     received: usize,
     next_row: usize,
-    /// The 2×2 average of an unpaired slice, waiting for its z partner.
+    /// The x–y average of an unpaired slice, waiting for its z partner.
     pending: Option<Vec<f32>>,
+    /// The axes the level above has half as many voxels along.
+    halve: [bool; 3],
 }
 
 impl Level {
@@ -226,6 +239,7 @@ impl Level {
             received: 0,
             next_row: 0,
             pending: None,
+            halve: layout.split(level),
         }
     }
 
@@ -281,13 +295,15 @@ struct Sink<'a> {
 fn push_slice(levels: &mut [Level], l: usize, slice: Vec<f32>, sink: &mut Sink) -> Result<()> {
     let parent_slice = {
         let lv = &mut levels[l];
-        let half = (l > 0).then(|| halve_xy(&slice, lv.dims[0], lv.dims[1]));
+        let [hx, hy, hz] = lv.halve;
+        let half = (l > 0).then(|| halve_xy(&slice, lv.dims[0], lv.dims[1], hx, hy));
         lv.slices.push_back(slice);
         lv.received += 1;
         while lv.next_row < lv.bricks[2] && lv.received > lv.last_needed(lv.next_row) {
             emit_row(lv, sink)?;
         }
         match (half, lv.pending.take()) {
+            (Some(h), _) if !hz => Some(h),
             (Some(h), Some(p)) => Some(p.iter().zip(&h).map(|(&a, &b)| mean2(a, b)).collect()),
             (Some(h), None) => {
                 lv.pending = Some(h);
@@ -312,16 +328,25 @@ fn mean2(a: f32, b: f32) -> f32 {
     }
 }
 
-/// 2×2 average of a slice in x and y; at an odd edge the average is over the
-/// voxels that exist, and no-data (NaN) voxels are left out of it (NaN only
-/// where all four are).
-fn halve_xy(s: &[f32], nx: usize, ny: usize) -> Vec<f32> {
-    let (hx, hy) = (nx.div_ceil(2), ny.div_ceil(2));
+/// 2×2 average of a slice in x and y (2×1, 1×2 or a copy where only one
+/// or neither is halved); at an odd edge the average is over the voxels that
+/// exist, and no-data (NaN) voxels are left out of it (NaN only where all
+/// four are).
+fn halve_xy(s: &[f32], nx: usize, ny: usize, halve_x: bool, halve_y: bool) -> Vec<f32> {
+    let pair = |i: usize, n: usize, halve: bool| {
+        if halve {
+            (2 * i, (2 * i + 1).min(n - 1))
+        } else {
+            (i, i)
+        }
+    };
+    let hx = if halve_x { nx.div_ceil(2) } else { nx };
+    let hy = if halve_y { ny.div_ceil(2) } else { ny };
     let mut out = Vec::with_capacity(hx * hy);
     for j in 0..hy {
-        let (y0, y1) = (2 * j, (2 * j + 1).min(ny - 1));
+        let (y0, y1) = pair(j, ny, halve_y);
         for i in 0..hx {
-            let (x0, x1) = (2 * i, (2 * i + 1).min(nx - 1));
+            let (x0, x1) = pair(i, nx, halve_x);
             let mut taps = [f32::NAN; 4];
             taps[0] = s[y0 * nx + x0];
             if x1 != x0 {

@@ -55,10 +55,12 @@ pub fn describe(db: &OctreeDb) -> String {
     let _ = writeln!(o, "levels:        {}", l.levels);
     for (lvl, (stored, empty)) in bricks_per_level(db).iter().enumerate() {
         let d = l.level_dims(lvl as u32);
+        let sc = l.voxel_scale(lvl as u32);
+        let e: [f64; 3] = std::array::from_fn(|a| sc[a] as f64 * h.info.spacing[a]);
         let _ = writeln!(
             o,
-            "  level {lvl}: {:>5} × {:>5} × {:>5} voxels, {stored:>8} stored, {empty:>8} empty",
-            d[0], d[1], d[2]
+            "  level {lvl}: {:>5} × {:>5} × {:>5} voxels of {} × {} × {}, {stored:>8} stored, {empty:>8} empty",
+            d[0], d[1], d[2], e[0], e[1], e[2]
         );
     }
     let src = h.info.source_bytes();

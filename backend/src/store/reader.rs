@@ -5,8 +5,8 @@
 use super::cells::{self, Brick};
 use super::codec::{self, BrickEncoding, Framing};
 use super::format::{
-    bincode_config, Footer, Header, NodeRecord, Summary, Trailer, CELLS_VERSION, FOOTER_LEN, MAGIC,
-    OLDEST_VERSION, PREAMBLE_LEN, VERSION,
+    bincode_config, Footer, Header, HeaderV4, NodeRecord, Summary, Trailer, CELLS_VERSION,
+    FOOTER_LEN, MAGIC, OLDEST_VERSION, PREAMBLE_LEN, SPLITS_VERSION, VERSION,
 };
 use super::layout::{NodeKey, OctreeLayout};
 use anyhow::{bail, Context, Result};
@@ -64,9 +64,16 @@ impl OctreeDb {
         if crc32fast::hash(&head) != head_crc {
             bail!("{name}: header checksum mismatch (corrupt header)");
         }
-        let (header, _): (Header, usize) =
+        let header: Header = if version >= SPLITS_VERSION {
             bincode::serde::decode_from_slice(&head, bincode_config())
-                .with_context(|| format!("{name}: corrupt header"))?;
+                .with_context(|| format!("{name}: corrupt header"))?
+                .0
+        } else {
+            let (old, _): (HeaderV4, usize) =
+                bincode::serde::decode_from_slice(&head, bincode_config())
+                    .with_context(|| format!("{name}: corrupt header"))?;
+            old.upgrade()
+        };
 
         let mut foot = [0u8; FOOTER_LEN];
         file.read_exact_at(&mut foot, file_len - FOOTER_LEN as u64)?;
@@ -295,17 +302,32 @@ fn check_header(h: &Header) -> Result<()> {
             l.dims
         );
     }
-    let expected = OctreeLayout::new(l.dims, l.brick).levels;
-    if l.levels != expected {
-        bail!(
-            "levels {} does not match dims {:?} with bricks of {} ({expected} levels)",
-            l.levels,
-            l.dims,
-            l.brick
-        );
-    }
     if h.info.spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
         bail!("spacing {:?}: each must be finite and > 0", h.info.spacing);
+    }
+    let iso = OctreeLayout::new(l.dims, l.brick);
+    if l.levels != iso.levels && l.splits == iso.splits {
+        bail!(
+            "levels {} does not match dims {:?} with bricks of {} ({} levels)",
+            l.levels,
+            l.dims,
+            l.brick,
+            iso.levels
+        );
+    }
+    let fitted = OctreeLayout::for_spacing(l.dims, l.brick, h.info.spacing);
+    if *l != iso && *l != fitted {
+        bail!(
+            "levels {} with splits {:?} match neither the isotropic octree over dims {:?} with bricks of {} ({} levels) nor the one for spacing {:?} ({} levels, splits {:?})",
+            l.levels,
+            l.splits,
+            l.dims,
+            l.brick,
+            iso.levels,
+            h.info.spacing,
+            fitted.levels,
+            fitted.splits
+        );
     }
     Ok(())
 }
@@ -355,7 +377,7 @@ mod tests {
             variance: 0.0,
         };
         w.add(NodeKey::root(), stats, Some(&blob)).unwrap();
-        for c in NodeKey::root().children() {
+        for c in layout.children(NodeKey::root()) {
             w.add(c, stats, Some(&blob)).unwrap();
         }
         w.finish(Summary::default()).unwrap();
@@ -434,6 +456,11 @@ mod tests {
                 "too many levels",
                 Box::new(|p| craft_header(p, |h| h.layout.levels = 40)),
                 "levels 40",
+            ),
+            (
+                "splits of no octree",
+                Box::new(|p| craft_header(p, |h| h.layout.splits = [2, 0, 0])),
+                "splits [2, 0, 0]",
             ),
             (
                 "overlapping offsets",
