@@ -903,6 +903,8 @@ pub struct AnisotropyPoint {
     /// "near" or "far" (the volume four times smaller on screen).
     pub view: &'static str,
     pub accuracy: f64,
+    /// Multilevel sampling (G10 §4) on.
+    pub multilevel: bool,
     pub rmse: f64,
     pub max_abs: f64,
     pub bricks: u64,
@@ -917,7 +919,8 @@ pub struct AnisotropyPoint {
 /// levels that halve all three), seen obliquely at 256×192, near (a source
 /// millimetre is about 0.6 pixels) and far (0.15 pixels). Each is rendered
 /// at the default accuracy, the thick slices also at full detail (accuracy
-/// 0.01), with every other knob precise (full-precision bricks, exact
+/// 0.01) and with multilevel sampling (blending each leaf with its parent
+/// and grandparent across the split axes), with every other knob precise (full-precision bricks, exact
 /// interpolation, step 1/4, no early termination), and compared with its
 /// own exact integral: the difference between the two accuracies is what
 /// the level of detail costs. Writes `anisotropy.csv`.
@@ -959,25 +962,34 @@ pub fn anisotropy_study(
     // The thick slices in the octree whose levels halve every axis (before
     // format 5, `--isotropic-levels`) and in the one whose levels halve the
     // finer axes first.
-    // (name, isotropic levels, accuracies) of each import of a volume.
-    type Imports<'a> = &'a [(&'static str, bool, &'a [f64])];
+    // (name, isotropic levels, (accuracy, multilevel) renders) of each
+    // import of a volume.
+    type Imports<'a> = &'a [(&'static str, bool, &'a [(f64, bool)])];
     let volumes: [(&str, [usize; 3], [f64; 3], Imports<'_>); 2] = [
         (
             "isotropic 1 mm",
             [mm, mm, mm],
             [1.0, 1.0, 1.0],
-            &[("isotropic 1 mm", false, &[default])],
+            &[(
+                "isotropic 1 mm",
+                false,
+                &[(default, false), (default, true)],
+            )],
         ),
         (
             "0.5 x 0.5 x 4 mm slices",
             [2 * mm, 2 * mm, mm / 4],
             [0.5, 0.5, 4.0],
             &[
-                ("0.5 x 0.5 x 4 mm slices", false, &[default, 0.01]),
+                (
+                    "0.5 x 0.5 x 4 mm slices",
+                    false,
+                    &[(default, false), (0.01, false), (default, true)],
+                ),
                 (
                     "0.5 x 0.5 x 4 mm slices (levels halving all axes)",
                     true,
-                    &[default],
+                    &[(default, false)],
                 ),
             ],
         ),
@@ -1013,9 +1025,10 @@ pub fn anisotropy_study(
                 },
             )?;
             for (&(vw, sz), reference) in views.iter().zip(&references) {
-                for &accuracy in accuracies {
+                for &(accuracy, multilevel) in accuracies {
                     let cfg = RenderConfig {
                         accuracy,
+                        multilevel,
                         interpolation: parallax_common::config::Interpolation::Exact,
                         ..precise_config()
                     };
@@ -1027,13 +1040,15 @@ pub fn anisotropy_study(
                         dims,
                         view: vw,
                         accuracy,
+                        multilevel,
                         rmse,
                         max_abs,
                         bricks: f.stats.cut_leaves_with_data,
                         frame_ms,
                     };
                     eprintln!(
-                        "{name:>50}, {vw:>4}, accuracy {accuracy:<5}: RMSE {rmse:.2e}, max {max_abs:.2e}, {} bricks, {frame_ms:.0} ms",
+                        "{name:>50}, {vw:>4}, accuracy {accuracy:<5}{}: RMSE {rmse:.2e}, max {max_abs:.2e}, {} bricks, {frame_ms:.0} ms",
+                        if multilevel { ", multilevel" } else { "" },
                         p.bricks
                     );
                     points.push(p);
@@ -1043,13 +1058,13 @@ pub fn anisotropy_study(
     }
     write_table(
         &out.join("anisotropy.csv"),
-        "volume,spacing_mm,dims,view,accuracy,rmse,max_abs,bricks_in_cut,frame_ms",
+        "volume,spacing_mm,dims,view,accuracy,multilevel,rmse,max_abs,bricks_in_cut,frame_ms",
         points.iter().map(|p| {
             let [sx, sy, sz] = p.spacing;
             let [nx, ny, nz] = p.dims;
             format!(
-                "{},{sx}x{sy}x{sz},{nx}x{ny}x{nz},{},{},{:.6e},{:.6e},{},{:.1}",
-                p.volume, p.view, p.accuracy, p.rmse, p.max_abs, p.bricks, p.frame_ms
+                "{},{sx}x{sy}x{sz},{nx}x{ny}x{nz},{},{},{},{:.6e},{:.6e},{},{:.1}",
+                p.volume, p.view, p.accuracy, p.multilevel, p.rmse, p.max_abs, p.bricks, p.frame_ms
             )
         }),
     )?;
@@ -1057,7 +1072,7 @@ pub fn anisotropy_study(
         let at_default = |v: &str| {
             points
                 .iter()
-                .find(|p| p.volume == v && p.view == vw && p.accuracy == default)
+                .find(|p| p.volume == v && p.view == vw && p.accuracy == default && !p.multilevel)
                 .map(|p| (p.rmse, p.bricks))
                 .unwrap_or((f64::NAN, 0))
         };
