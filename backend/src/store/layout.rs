@@ -104,13 +104,21 @@ impl OctreeLayout {
         let mut steps: Vec<[bool; 3]> = Vec::new();
         let mut edge = spacing;
         let mut cover = [brick; 3];
+        // Voxels along each axis at the level being built: an axis down to
+        // one voxel no longer sets the pace (a fine axis of a thin volume
+        // would otherwise be halved alone, level after level).
+        let mut n = dims;
         while (0..3).any(|a| cover[a] < dims[a]) {
-            let shortest = edge.iter().cloned().fold(f64::INFINITY, f64::min);
+            let shortest = (0..3)
+                .filter(|&a| n[a] > 1)
+                .map(|a| edge[a])
+                .fold(f64::INFINITY, f64::min);
             let halve: [bool; 3] = std::array::from_fn(|a| edge[a] <= shortest * NEAR_CUBIC);
             for a in 0..3 {
                 if halve[a] {
                     edge[a] *= 2.0;
                     cover[a] = cover[a].saturating_mul(2);
+                    n[a] = n[a].div_ceil(2);
                 }
             }
             steps.push(halve);
@@ -362,5 +370,19 @@ mod tests {
         let tall = OctreeLayout::for_spacing([40, 40, 1000], 16, [0.25, 0.25, 5.0]);
         assert!(tall.level_bricks(0) == [1, 1, 1]);
         assert!((0..3).all(|a| tall.root_voxels()[a] >= tall.dims[a]));
+        // An axis down to one voxel no longer sets the pace: a single thick
+        // slice, and a very fine axis, leave the others to be halved.
+        let slab = OctreeLayout::for_spacing([512, 512, 1], 32, [0.5, 0.5, 4.0]);
+        assert_eq!(slab.levels, 5);
+        assert_eq!(slab.level_dims(0), [32, 32, 1]);
+        // Thin but isotropic: the isotropic octree.
+        let thin = OctreeLayout::for_spacing([1000, 2, 2], 4, [0.3; 3]);
+        assert_eq!(thin, OctreeLayout::new([1000, 2, 2], 4));
+        let fine = OctreeLayout::for_spacing([64, 64, 64], 8, [1e-3, 1.0, 1.0]);
+        // x alone down to one voxel (6 levels), then y and z together (3).
+        assert_eq!(fine.levels, 10);
+        assert_eq!(fine.level_dims(3), [1, 64, 64]);
+        assert_eq!(fine.level_dims(0), [1, 8, 8]);
+        assert_eq!(fine.level_bricks(0), [1, 1, 1]);
     }
 }
