@@ -44,7 +44,7 @@ override COUNT_SAMPLES: bool = false;
 // loop carries no per-sample test (on SIMD hardware a rare branch taken by
 // one lane is paid by all of them).
 fn cell_span(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
-    let voxel = frame.spacing.xyz * level_scale(leaf.level);
+    let voxel = leaf.voxel;
     let n = frame.aux.z;
     let cell = voxel * f32(frame.aux.w);
     let base = leaf.cell * f32(frame.counts.x) * voxel;
@@ -223,7 +223,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let slot = n.data & NO_SLOT;
         var bent = false;
         if (slot != NO_SLOT && t_exit > t) {
-            let leaf = Leaf(node, level, cell, slot);
+            let leaf = make_leaf(node, level, cell, slot);
             // Multilevel sampling blends in coarser levels only in leaves
             // that the view needs coarser somewhere along the ray (the
             // footprint grows monotonically along a ray from the observer;
@@ -237,8 +237,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     && max(lod_offset(level, o + d * t), lod_offset(level, o + d * t_exit)) > 0.0;
             }
             // Sampling rate matched to the leaf's level.
-            let ve = frame.spacing.xyz * level_scale(level);
-            let voxel = min(min(ve.x, ve.y), ve.z);
+            let voxel = min(min(leaf.voxel.x, leaf.voxel.y), leaf.voxel.z);
             var h = step_factor * voxel;
             if (frame.render.w > 0.5) {
                 // L12 §4.4 Eq. 3: λ = t·sin(θ/2), the radius of the pixel's

@@ -245,7 +245,7 @@ mod tests {
         let l = octree();
         let mut cut = refined_root(100.0);
         let root = NodeKey::root();
-        for (i, c) in l.children(root).into_iter().enumerate() {
+        for (i, c) in l.children(root).enumerate() {
             cut.insert(
                 c,
                 CutNode {
@@ -254,7 +254,8 @@ mod tests {
                 },
             );
         }
-        for (i, c) in l.children(l.children(root)[0]).into_iter().enumerate() {
+        let first = l.children(root).next().unwrap();
+        for (i, c) in l.children(first).enumerate() {
             cut.insert(c, leaf(if i == 7 { None } else { Some(20 + i as u32) }));
         }
         cut
@@ -316,7 +317,7 @@ mod tests {
         assert_eq!(l.split(2), [true, true, false]);
         let mut cut = refined_root(10.0);
         let root = NodeKey::root();
-        let kids = l.children(root);
+        let kids: Vec<_> = l.children(root).collect();
         assert_eq!(kids.len(), 8);
         for (i, c) in kids.iter().enumerate() {
             cut.insert(
@@ -328,7 +329,7 @@ mod tests {
             );
         }
         // Node 5 is level-1 (1, 0, 1): four children on level 2 (2..3, 0..1, 1).
-        let grand = l.children(kids[5]);
+        let grand: Vec<_> = l.children(kids[5]).collect();
         assert_eq!(grand.len(), 4);
         assert_eq!(grand[3], NodeKey::new(2, 3, 1, 1));
         for (i, c) in grand.iter().enumerate() {

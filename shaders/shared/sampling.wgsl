@@ -29,6 +29,12 @@ struct Leaf {
     level: u32,
     cell: vec3<f32>,   // brick coordinates at its level
     slot: u32,
+    voxel: vec3<f32>,  // its voxel's edges (data units): spacing · level_scale(level)
+}
+
+// The leaf `node` of `level` at brick coordinates `cell`, its data in `slot`.
+fn make_leaf(node: u32, level: u32, cell: vec3<f32>, slot: u32) -> Leaf {
+    return Leaf(node, level, cell, slot, frame.spacing.xyz * level_scale(level));
 }
 
 fn slot_origin(slot: u32) -> vec3<i32> {
@@ -86,7 +92,7 @@ fn tricubic(o: vec3<i32>, x: vec3<f32>) -> f32 {
 }
 
 fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
-    let voxel = frame.spacing.xyz * level_scale(leaf.level);
+    let voxel = leaf.voxel;
     let side = f32(frame.pool.w);
     let local = clamp(p / voxel - leaf.cell * f32(frame.counts.x) + vec3<f32>(OVERLAP - 0.5),
                       vec3<f32>(0.0), vec3<f32>(side - 1.0));
@@ -140,7 +146,7 @@ fn partial(a: f32, b: f32, c: f32, h: f32) -> f32 {
 }
 
 fn gradient(leaf: Leaf, p: vec3<f32>) -> vec3<f32> {
-    let h = frame.spacing.xyz * level_scale(leaf.level);
+    let h = leaf.voxel;
     if (NO_DATA) {
         let c = sample_brick(leaf, p);
         let ex = vec3<f32>(h.x, 0.0, 0.0);
@@ -188,13 +194,13 @@ fn levels_of(leaf: Leaf, n: IndexNode) -> Levels {
         return lv;
     }
     let pn = index[pi];
-    lv.up = Leaf(pi, leaf.level - 1u, floor(leaf.cell / vec3<f32>(level_split(leaf.level) + 1u)),
+    lv.up = make_leaf(pi, leaf.level - 1u, floor(leaf.cell / vec3<f32>(level_split(leaf.level) + 1u)),
                  pn.data & NO_SLOT);
     let gi = pn.tree & 0xFFFFu;
     if (lv.up.slot == NO_SLOT || gi == NONE16) {
         return lv;
     }
-    lv.up2 = Leaf(gi, leaf.level - 2u, floor(lv.up.cell / vec3<f32>(level_split(leaf.level - 1u) + 1u)),
+    lv.up2 = make_leaf(gi, leaf.level - 2u, floor(lv.up.cell / vec3<f32>(level_split(leaf.level - 1u) + 1u)),
                   index[gi].data & NO_SLOT);
     return lv;
 }

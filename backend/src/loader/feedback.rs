@@ -108,7 +108,7 @@ mod tests {
             },
         );
         let l = crate::store::OctreeLayout::new([32, 32, 32], 8);
-        let ch = |k: NodeKey| l.children(k);
+        let ch = |k: NodeKey| l.children(k).collect::<Vec<_>>();
         let kids = ch(root);
         for (i, c) in kids.iter().copied().enumerate() {
             cut.insert(

@@ -728,7 +728,7 @@ mod tests {
             },
         );
         let root = NodeKey::root();
-        let kids = db.layout().children(root);
+        let kids: Vec<_> = db.layout().children(root).collect();
         let far = |x| NodeKey::new(2, x, 3, 3);
         // Allocation order is recency order: child 1 oldest, then two
         // unrelated bricks, then children 2..7, then the root.

@@ -65,34 +65,10 @@ impl Macrocells {
 
     /// The ranges of one uploaded brick, from the (B+4)³ values the kernel
     /// interpolates (`value(i)`: the data value of stored voxel i, None
-    /// for no data).
+    /// for no data), as the importer computes them (`store::cells`).
     fn set_ranges(&mut self, slot: u32, side: u32, value: impl Fn(usize) -> Option<f64>) {
-        let (c, m) = (self.per_axis as usize, self.voxels as usize);
-        let s = side as usize;
-        let n = self.cells();
-        for cz in 0..c {
-            for cy in 0..c {
-                for cx in 0..c {
-                    // Interpolation at core coordinate u ∈ [c·M, (c+1)·M]
-                    // (voxel centres at i + ½) reads core voxels c·M − 1 …
-                    // (c+1)·M, stored 2 further on (the overlap).
-                    let span = |k: usize| k * m + 1..=(k + 1) * m + 2;
-                    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-                    for z in span(cz) {
-                        for y in span(cy) {
-                            for x in span(cx) {
-                                if let Some(v) = value((z * s + y) * s + x) {
-                                    lo = lo.min(v);
-                                    hi = hi.max(v);
-                                }
-                            }
-                        }
-                    }
-                    self.ranges[slot as usize * n + (cz * c + cy) * c + cx] =
-                        [lo as f32, hi as f32];
-                }
-            }
-        }
+        let b = side as usize - 2 * crate::store::OVERLAP;
+        self.set_stored(slot, &crate::store::cells::ranges(b, value));
     }
 
     /// Marks the empty cells of `slot` under `empty(lo, hi)`.

@@ -86,11 +86,7 @@ impl HeaderV4 {
     /// name it.
     pub fn upgrade(self) -> Header {
         let l = self.layout;
-        let all = if (1..super::layout::MAX_LEVELS).contains(&l.levels) {
-            ((1u64 << l.levels) - 2) as u32
-        } else {
-            0
-        };
+        let all = super::layout::every_level_splits(l.levels);
         Header {
             info: self.info,
             layout: OctreeLayout {

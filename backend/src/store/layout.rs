@@ -64,6 +64,16 @@ pub struct OctreeLayout {
 /// Most levels an octree may have (the split masks are 32-bit words).
 pub const MAX_LEVELS: u32 = 32;
 
+/// The split mask of an axis that every level below the root halves (bits
+/// 1 … levels − 1); 0 for a level count out of range.
+pub fn every_level_splits(levels: u32) -> u32 {
+    if (1..=MAX_LEVELS).contains(&levels) {
+        ((1u64 << levels) - 2) as u32
+    } else {
+        0
+    }
+}
+
 /// An axis whose voxels are at most this much longer than the shortest
 /// voxel edge is halved with it (√2: voxels stay within a factor √2 of
 /// cubic once the finer axes have caught up).
@@ -79,12 +89,11 @@ impl OctreeLayout {
         while (brick << depth) < largest {
             depth += 1;
         }
-        let all = ((1u64 << (depth + 1)) - 2) as u32;
         OctreeLayout {
             dims,
             brick,
             levels: depth + 1,
-            splits: [all; 3],
+            splits: [every_level_splits(depth + 1); 3],
         }
     }
 
@@ -149,12 +158,6 @@ impl OctreeLayout {
     /// L: the level that holds the source voxels.
     pub fn leaf_level(&self) -> u32 {
         self.levels - 1
-    }
-
-    /// Whether every level halves every axis.
-    pub fn is_isotropic(&self) -> bool {
-        self.splits == Self::new(self.dims, self.brick).splits
-            && self.levels == Self::new(self.dims, self.brick).levels
     }
 
     /// Which axes level `level` halves against level − 1 (none at the root).
@@ -223,24 +226,22 @@ impl OctreeLayout {
     /// The children of a node (some may lie outside the volume), in the
     /// order of their index c: its bits, lowest first, are the child's
     /// offset along each halved axis in x, y, z order.
-    pub fn children(&self, key: NodeKey) -> Vec<NodeKey> {
+    pub fn children(&self, key: NodeKey) -> impl Iterator<Item = NodeKey> {
         let s = self.split(key.level as u32 + 1);
         let c = key.coords();
-        (0..self.child_count(key.level as u32) as u32)
-            .map(|i| {
-                let mut bit = 0;
-                let k: [u32; 3] = std::array::from_fn(|a| {
-                    if s[a] {
-                        let o = (i >> bit) & 1;
-                        bit += 1;
-                        2 * c[a] + o
-                    } else {
-                        c[a]
-                    }
-                });
-                NodeKey::new(key.level + 1, k[0], k[1], k[2])
-            })
-            .collect()
+        (0..self.child_count(key.level as u32) as u32).map(move |i| {
+            let mut bit = 0;
+            let k: [u32; 3] = std::array::from_fn(|a| {
+                if s[a] {
+                    let o = (i >> bit) & 1;
+                    bit += 1;
+                    2 * c[a] + o
+                } else {
+                    c[a]
+                }
+            });
+            NodeKey::new(key.level + 1, k[0], k[1], k[2])
+        })
     }
 
     /// The child index (see [`OctreeLayout::children`]) of the child of a
@@ -322,8 +323,8 @@ mod tests {
     fn children_and_parent() {
         let l = OctreeLayout::new([256, 256, 256], 32);
         let k = NodeKey::new(2, 3, 1, 2);
-        assert_eq!(l.children(k).len(), 8);
-        for (i, c) in l.children(k).into_iter().enumerate() {
+        assert_eq!(l.children(k).count(), 8);
+        for (i, c) in l.children(k).enumerate() {
             assert_eq!(l.parent(c), Some(k));
             let cc = c.coords().map(|v| v as u64);
             assert_eq!(l.child_index(2, cc), i as u32);
@@ -344,11 +345,11 @@ mod tests {
         assert_eq!(l.voxel_scale(2), [4, 4, 1]);
         assert_eq!(l.root_voxels(), [512, 512, 64]);
         assert_eq!(l.level_cells(2), [4, 4, 2]);
-        assert!(!l.is_isotropic());
+        assert_ne!(l, OctreeLayout::new(l.dims, l.brick));
         assert_eq!(l.child_count(0), 8);
         assert_eq!(l.child_count(2), 4);
         let k = NodeKey::new(2, 3, 1, 1);
-        let kids = l.children(k);
+        let kids: Vec<_> = l.children(k).collect();
         assert_eq!(kids.len(), 4);
         assert_eq!(kids[3], NodeKey::new(3, 7, 3, 1));
         for (i, c) in kids.into_iter().enumerate() {
@@ -365,7 +366,6 @@ mod tests {
         // Near-cubic voxels: the isotropic octree.
         let iso = OctreeLayout::for_spacing([181, 217, 181], 32, [1.0, 1.0, 1.2]);
         assert_eq!(iso, OctreeLayout::new([181, 217, 181], 32));
-        assert!(iso.is_isotropic());
         // A coarse axis with many voxels still ends under one root brick.
         let tall = OctreeLayout::for_spacing([40, 40, 1000], 16, [0.25, 0.25, 5.0]);
         assert!(tall.level_bricks(0) == [1, 1, 1]);
