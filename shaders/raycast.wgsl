@@ -37,39 +37,35 @@ override MACROCELLS: bool = false;
 // Count the samples taken (`counters`): benches and tests.
 override COUNT_SAMPLES: bool = false;
 
-// The part of [t0, t1] in which the ray crosses non-empty macrocells of
-// `leaf`: (where it enters the first, where it leaves the last), or x > y
-// when every cell it crosses is empty. A 3D DDA over the brick's C³ cells
-// (Amanatides and Woo), done once as the ray enters the leaf, so the sample
-// loop carries no per-sample test (on SIMD hardware a rare branch taken by
-// one lane is paid by all of them).
-fn cell_span(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
+// The distance from `p` along `d` (unit, 1/d in `inv_d`) to where the ray
+// enters the first non-empty macrocell of `leaf` within `len`, or 3e38 when
+// it crosses none: a 3D DDA over the brick's C³ cells (Amanatides and Woo)
+// that stops at the first non-empty cell.
+fn first_cell(leaf: Leaf, p: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, len: f32) -> f32 {
     let voxel = leaf.voxel;
     let n = frame.aux.z;
     let cell = voxel * f32(frame.aux.w);
     let base = leaf.cell * f32(frame.counts.x) * voxel;
-    // The cell of the point a little past t0 (a point on a face belongs
-    // to the cell the ray enters).
-    let tm = t0 + 1e-4 * min(t1 - t0, min(min(cell.x, cell.y), cell.z));
-    var c = vec3<i32>(clamp(floor((o + d * tm - base) / cell), vec3<f32>(0.0),
+    // The cell of the point a little past p (a point on a face belongs to
+    // the cell the ray enters).
+    let tm = 1e-4 * min(len, min(min(cell.x, cell.y), cell.z));
+    var c = vec3<i32>(clamp(floor((p + d * tm - base) / cell), vec3<f32>(0.0),
                             vec3<f32>(f32(n) - 1.0)));
     let step = vec3<i32>(sign(d));
     let big = vec3<f32>(3.0e38);
-    let t_delta = select(abs(cell * inv_d), big, abs(d) < vec3<f32>(1e-30));
+    let flat = abs(d) < vec3<f32>(1e-30);
+    let t_delta = select(abs(cell * inv_d), big, flat);
     let next_face = base + (vec3<f32>(c) + select(vec3<f32>(0.0), vec3<f32>(1.0), d > vec3<f32>(0.0))) * cell;
-    var t_max = select((next_face - o) * inv_d, big, abs(d) < vec3<f32>(1e-30));
-    var t_in = t0;
-    var first = 3.0e38;
-    var last = -3.0e38;
+    var t_max = select((next_face - p) * inv_d, big, flat);
+    var t_in = 0.0;
     let words = leaf.slot;
     for (var i = 0u; i < 3u * n; i = i + 1u) {
-        let t_out = min(min(t_max.x, t_max.y), t_max.z);
         let k = u32(c.x) + n * (u32(c.y) + n * u32(c.z));
         if (((slots[words].cells[k / 32u] >> (k % 32u)) & 1u) == 0u) {
-            first = min(first, t_in);
-            last = min(t_out, t1);
+            return t_in;
         }
-        if (t_out >= t1) {
+        let t_out = min(min(t_max.x, t_max.y), t_max.z);
+        if (t_out >= len) {
             break;
         }
         t_in = t_out;
@@ -87,7 +83,33 @@ fn cell_span(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, 
             break;
         }
     }
-    return vec2<f32>(max(first, t0), last);
+    return 3.0e38;
+}
+
+// The part of [t0, t1] in which the ray crosses non-empty macrocells of
+// `leaf`: (where it enters the first, where it leaves the last), or x > y
+// when every cell it crosses is empty. Done once as the ray enters the
+// leaf, so the sample loop carries no per-sample test (on SIMD hardware a
+// rare branch taken by one lane is paid by all of them): one DDA from the
+// entry to the first non-empty cell, one back from the exit to the last,
+// so a leaf of full cells costs two cell lookups, not a walk through all
+// of them. The span is widened by a thousandth of a cell against rounding:
+// a segment in empty cells adds exactly nothing, so a wider span changes
+// no pixel.
+fn cell_span(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
+    let len = t1 - t0;
+    let r0 = first_cell(leaf, o + d * t0, d, inv_d, len);
+    if (r0 > 1.0e38) {
+        return vec2<f32>(1.0, 0.0);
+    }
+    let r1 = first_cell(leaf, o + d * t1, -d, -inv_d, len);
+    let cell = leaf.voxel * f32(frame.aux.w);
+    let margin = 1e-3 * min(min(cell.x, cell.y), cell.z);
+    var last = t1;
+    if (r1 < 1.0e38) {
+        last = min(t1 - r1 + margin, t1);
+    }
+    return vec2<f32>(max(t0 + r0 - margin, t0), last);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -188,6 +210,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var probe = (o + d * t) / frame.domain.xyz + nudge;
     var node = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
     var s_prev = 0.0;
+    var e_prev: TfEnd;
     var have_prev = false;
     var nu_prev = -1.0;
     var n_samples = 0u;
@@ -288,6 +311,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             if (!have_prev && !skip_first) {
                 s_prev = sample_levels(lv, blend, o + d * t);
+                if (!ISO) {
+                    e_prev = tf_end(s_prev);
+                }
                 have_prev = true;
                 n_samples = n_samples + 1u;
             }
@@ -307,10 +333,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
                 let s = sample_levels(lv, blend, o + d * tn);
                 n_samples = n_samples + 1u;
+                var e: TfEnd;
+                if (!ISO) {
+                    e = tf_end(s);
+                }
                 if (MACROCELLS && skip_first) {
                     skip_first = false;
                     have_prev = true;
                     s_prev = s;
+                    e_prev = e;
                     tc = tn;
                     if (tc >= t_exit) {
                         break;
@@ -364,13 +395,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (NO_DATA && !(has_data(s) && has_data(s_prev))) {
                     // A segment with an end that lacks data adds nothing.
                     s_prev = s;
+                    e_prev = e;
                     tc = tn;
                     if (tc >= t_exit) {
                         break;
                     }
                     continue;
                 }
-                let avg = segment_average(0u, frame.counts.w, s_prev, s);
+                var avg: vec4<f32>;
+                if (END_PREINT) {
+                    avg = end_average(e_prev, e);
+                } else {
+                    avg = segment_average(0u, frame.counts.w, s_prev, s);
+                }
                 var smp: Sample;
                 smp.pos = o + d * (0.5 * (tc + tn));
                 smp.len = tn - tc;
@@ -407,6 +444,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
                 accumulate(&acc, segment_optics(smp, shade), smp);
                 s_prev = s;
+                e_prev = e;
                 tc = tn;
                 if (REFRACTION) {
                     // Snell's law where the refraction index changes, about

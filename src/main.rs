@@ -313,6 +313,7 @@ enum Command {
 
 fn main() {
     ensure_runtime_dir();
+    parallax_backend::gpu::spread_cpu_device_work();
     init_logging();
     if let Err(e) = run(Cli::parse()) {
         eprintln!("error: {e:#}");

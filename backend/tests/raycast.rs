@@ -98,6 +98,7 @@ struct Measured {
     max: f64,
     mean_alpha: f64,
     running_integral: bool,
+    end_path: bool,
     feedback: Vec<u32>,
 }
 
@@ -108,11 +109,13 @@ fn measure(
     f: &TransferFunction,
     cut: &HashMap<parallax_backend::store::NodeKey, CutNode>,
     pool: &BrickPool,
+    end_path: bool,
 ) -> Measured {
     let range = (s.db.summary.value_min, s.db.summary.value_max);
     let (lo, hi) = (range.0 as f64, range.1 as f64);
     let table = PreintTable::new(f, lo, hi, PreintTable::suggested_bins(lo, hi, true)).unwrap();
-    let gtf = TfTable::new(gpu, &table, f.max_importance());
+    let mut gtf = TfTable::new(gpu, &table, f.max_importance());
+    gtf.allow_end_path(end_path);
     let index = SpatialIndex::build(s.db.layout(), cut, range).unwrap();
     let sc = scene(&s.db);
     let view = View::window([40, 32], [0.4, 0.32], [0.02, 0.01, 0.8]);
@@ -146,6 +149,7 @@ fn measure(
         max,
         mean_alpha,
         running_integral: gtf.uses_running_integral(),
+        end_path: gtf.uses_end_path(),
         feedback: out.feedback,
     }
 }
@@ -176,7 +180,8 @@ fn full_detail(filtering: Filtering, bound: f64) {
         let s = setup(kind, 40, BrickEncoding::F32);
         let f = tf();
         let (cut, pool) = full_cut(&gpu, &s.db, true);
-        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool);
+        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool, true);
+        assert!(m.end_path, "the test transfer function allows the end path");
         let (out, want, e, mx, mean_a) = (m.image, m.reference, m.rmse, m.max, m.mean_alpha);
         let feedback = m.feedback;
         eprintln!("{filtering:?} {kind:?}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}");
@@ -289,31 +294,50 @@ fn traversal_covers_every_path_exactly_once() {
     }
 }
 
-/// The GPU sums whole bins by the running integral where the transfer
-/// function's range allows and by the dyadic pyramid otherwise; both match
-/// the reference. The second transfer function spans 1e-6…0.3 per unit,
+/// The GPU pre-integrates from the segments' ends where the transfer
+/// function's range allows (each sample reads its bin once), otherwise per
+/// segment, summing whole bins by the running integral or, for extreme
+/// ranges, by the dyadic pyramid; every path matches the reference, and on
+/// the same transfer function the end path and the per-segment path give
+/// the same image. The second transfer function spans 1e-4…0.3 per unit
+/// (a running integral, too wide for f32 partial bins), the third 1e-6…0.3,
 /// which forces the pyramid.
 #[test]
-fn both_table_paths_match_the_reference() {
+fn every_table_path_matches_the_reference() {
     let gpu = Gpu::new().unwrap();
     let mut rc = Raycaster::new(&gpu, true, Filtering::Exact).unwrap();
     let s = setup(SynthKind::Shells, 40, BrickEncoding::F32);
     let (cut, pool) = full_cut(&gpu, &s.db, true);
-    let extreme = TransferFunction::from_points(vec![
-        ControlPoint::new(0.0, [0.2, 0.2, 0.2], 1e-6),
-        ControlPoint::new(90.0, [0.2, 0.2, 0.2], 1e-6),
-        ControlPoint::new(160.0, [1.0, 0.3, 0.1], 0.08),
-        ControlPoint::new(255.0, [0.5, 0.7, 1.0], 0.3),
-    ])
-    .unwrap();
-    for (f, prefix) in [(tf(), true), (extreme, false)] {
-        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool);
-        assert_eq!(m.running_integral, prefix);
+    let spanning = |low: f64| {
+        TransferFunction::from_points(vec![
+            ControlPoint::new(0.0, [0.2, 0.2, 0.2], low),
+            ControlPoint::new(90.0, [0.2, 0.2, 0.2], low),
+            ControlPoint::new(160.0, [1.0, 0.3, 0.1], 0.08),
+            ControlPoint::new(255.0, [0.5, 0.7, 1.0], 0.3),
+        ])
+        .unwrap()
+    };
+    let mut by_end = None;
+    for (f, end, prefix, name) in [
+        (tf(), true, true, "end path"),
+        (tf(), false, true, "per segment, running integral"),
+        (spanning(1e-4), true, true, "wide range: running integral"),
+        (spanning(1e-6), true, false, "extreme range: pyramid"),
+    ] {
+        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool, end);
+        assert_eq!(m.running_integral, prefix, "{name}");
+        assert_eq!(m.end_path, name == "end path", "{name}");
         let (e, mx, mean_a) = (m.rmse, m.max, m.mean_alpha);
-        eprintln!(
-            "running integral {prefix}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}"
-        );
+        eprintln!("{name}: RMSE {e:.2e}, max {mx:.2e}, mean opacity {mean_a:.3}");
         assert!(mean_a > 0.02);
-        assert!(e <= 1e-3, "running integral {prefix}: RMSE {e}");
+        assert!(e <= 1e-3, "{name}: RMSE {e}");
+        if m.end_path {
+            by_end = Some(m.image);
+        } else if let (Some(first), true) = (&by_end, name.starts_with("per segment")) {
+            let first: Vec<[f64; 4]> = first.iter().map(|p| p.map(|x| x as f64)).collect();
+            let (d, dmax) = support::error(&m.image, &first);
+            eprintln!("end path against per segment: RMSE {d:.2e}, max {dmax:.2e}");
+            assert!(dmax < 2e-6, "the two sums differ by {dmax}");
+        }
     }
 }

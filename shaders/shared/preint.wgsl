@@ -71,3 +71,91 @@ fn segment_average(base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
     }
     return sum / (ub - ua);
 }
+
+// One end of a pre-integrated segment (table part at 0), for the march's
+// fast path. Consecutive segments share an end, so each sample reads its
+// bin once: five loads (its two nodes, its midpoint value, the running
+// integral at its lower node as an f32 pair) and carries what the next
+// segment needs, instead of reading both ends' bins again per segment.
+// Used where the table allows it (END_PREINT: a running integral, and a
+// range of bin integrals narrow enough for f32 partial bins); a pipeline
+// constant, not a uniform, because a CPU device pays for both sides of a
+// branch it cannot prove uniform.
+struct TfEnd {
+    u: f32,            // table coordinate, clamped to [0, N]
+    j: u32,            // its bin
+    hi: vec4<f32>,     // running integral at node j (f32 pair)
+    lo: vec4<f32>,
+    below: vec4<f32>,  // ∫ over [j, u] of bin j's quadratic
+    above: vec4<f32>,  // ∫ over [u, j + 1]
+    a: vec4<f32>,      // bin j: node values and midpoint value
+    m: vec4<f32>,
+    b: vec4<f32>,
+}
+
+override END_PREINT: bool = false;
+
+
+fn tf_end(s: f32) -> TfEnd {
+    var e: TfEnd;
+    if (!END_PREINT) {
+        return e;
+    }
+    let n = u32(frame.tf.z);
+    e.u = clamp((s - frame.tf.x) / frame.tf.y, 0.0, f32(n));
+    e.j = min(u32(e.u), n - 1u);
+    let x = e.u - f32(e.j);
+    e.a = table[e.j];
+    e.b = table[e.j + 1u];
+    e.m = table[frame.tf_mids.x + e.j];
+    let p = frame.counts.w + 2u * e.j;
+    e.hi = table[p];
+    e.lo = table[p + 1u];
+    // ∫₀ˣ of the quadratic through a (0), m (½), b (1), and ∫ₓ¹ by the same
+    // polynomial in y = 1 − x (both without cancellation near their zero).
+    let x2 = x * x;
+    let x3 = x2 * x;
+    e.below = e.a * (x - 1.5 * x2 + (2.0 / 3.0) * x3) + e.m * (2.0 * x2 - (4.0 / 3.0) * x3)
+        + e.b * ((2.0 / 3.0) * x3 - 0.5 * x2);
+    let y = 1.0 - x;
+    let y2 = y * y;
+    let y3 = y2 * y;
+    e.above = e.b * (y - 1.5 * y2 + (2.0 / 3.0) * y3) + e.m * (2.0 * y2 - (4.0 / 3.0) * y3)
+        + e.a * ((2.0 / 3.0) * y3 - 0.5 * y2);
+    return e;
+}
+
+// The average of (τ, k̃) over the data segment between two ends (`e1` the
+// newer one, whose bin's values it carries): what segment_average(0, …)
+// gives, from the ends alone. One bin: bin_average's exact form. Adjacent
+// bins: the part of each bin on the segment's side, nothing subtracted.
+// Further apart: the running integral between the two lower nodes, less the
+// lower end's part below it, plus the upper end's (the segment spans more
+// than a bin, so the difference keeps f32's precision relative to the
+// table's largest bin, which the range check on the CPU bounds).
+fn end_average(e0: TfEnd, e1: TfEnd) -> vec4<f32> {
+    if (e0.j == e1.j) {
+        let x0 = e0.u - f32(e1.j);
+        let x1 = e1.u - f32(e1.j);
+        let t = 0.5 * (x0 + x1);
+        let w = x1 - x0;
+        let a = e1.a;
+        let b = e1.b;
+        let m = e1.m;
+        let f = a * ((1.0 - t) * (1.0 - 2.0 * t)) + m * (4.0 * t * (1.0 - t)) + b * (t * (2.0 * t - 1.0));
+        return max(f + (a + b - 2.0 * m) * (w * w / 6.0), vec4<f32>(0.0));
+    }
+    let up = e1.u > e0.u;
+    var sum: vec4<f32>;
+    if (up && e1.j == e0.j + 1u) {
+        sum = e0.above + e1.below;
+    } else if (!up && e0.j == e1.j + 1u) {
+        sum = e1.above + e0.below;
+    } else {
+        sum = ((e1.hi - e0.hi) + (e1.lo - e0.lo)) + (e1.below - e0.below);
+        if (!up) {
+            sum = -sum;
+        }
+    }
+    return max(sum / abs(e1.u - e0.u), vec4<f32>(0.0));
+}

@@ -40,6 +40,12 @@ pub struct TfTable {
     aux_prefix: u32,
     /// ι_max of the transfer function (MImDA's termination estimate).
     max_importance: f32,
+    /// Whether the march pre-integrates from the segments' ends
+    /// (preint.wgsl `end_average`), and whether the table allows it: a
+    /// running integral, and bin integrals within [`END_RANGE`] of each
+    /// other in every DVR channel.
+    end_path: bool,
+    end_allowed: bool,
     /// Which table this is (a bind group names one table).
     id: u64,
 }
@@ -53,6 +59,25 @@ pub(crate) fn next_resource_id() -> u64 {
 /// Largest F_total / (smallest non-zero bin) for which the running integral
 /// is used.
 const PREFIX_RANGE: f64 = (1u64 << 20) as f64;
+
+/// Largest (largest bin integral) / (smallest non-zero one) of a channel for
+/// which the march pre-integrates from the segments' ends: its f32 partial
+/// bins then err by at most 2⁻²³·2¹² = 2⁻¹¹ of the smallest non-zero bin.
+const END_RANGE: f64 = (1u64 << 12) as f64;
+
+/// `x` / (smallest non-zero bin integral of a channel); 1 where `x` is 0.
+fn over_smallest_bin(bins: &[f64], x: f64) -> f64 {
+    let min = bins
+        .iter()
+        .cloned()
+        .filter(|&x| x > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    if x > 0.0 {
+        x / min
+    } else {
+        1.0
+    }
+}
 
 impl TfTable {
     pub fn new(gpu: &Gpu, table: &PreintTable, max_importance: f64) -> Self {
@@ -93,10 +118,24 @@ impl TfTable {
                 contents: bytemuck::cast_slice(&data),
                 usage: wgpu::BufferUsages::STORAGE,
             });
+        let end_allowed = prefix_offset != 0
+            && [
+                Channel::Tau,
+                Channel::EmissionR,
+                Channel::EmissionG,
+                Channel::EmissionB,
+            ]
+            .iter()
+            .all(|&ch| {
+                let bins = table.level(ch, 0);
+                over_smallest_bin(bins, bins.iter().cloned().fold(0.0, f64::max)) <= END_RANGE
+            });
         TfTable {
             buffer,
             layout,
             prefix_offset,
+            end_path: end_allowed,
+            end_allowed,
             aux_base,
             aux_prefix,
             max_importance: max_importance as f32,
@@ -125,19 +164,7 @@ impl TfTable {
         let n = table.level(Channel::Tau, 0).len();
         let range = bins
             .iter()
-            .map(|b| {
-                let total: f64 = b.iter().sum();
-                let min = b
-                    .iter()
-                    .cloned()
-                    .filter(|&x| x > 0.0)
-                    .fold(f64::INFINITY, f64::min);
-                if total > 0.0 {
-                    total / min
-                } else {
-                    1.0
-                }
-            })
+            .map(|b| over_smallest_bin(b, b.iter().sum()))
             .fold(1.0, f64::max);
         if range > PREFIX_RANGE {
             return 0;
@@ -161,6 +188,19 @@ impl TfTable {
     /// Whether whole bins are summed by the running integral.
     pub fn uses_running_integral(&self) -> bool {
         self.prefix_offset != 0
+    }
+
+    /// Whether the march pre-integrates from the segments' ends (each
+    /// sample reads its bin once) rather than per segment.
+    pub fn uses_end_path(&self) -> bool {
+        self.end_path
+    }
+
+    /// Pre-integrates per segment even where the table allows the end path
+    /// (`false`), or from the ends again where it allows it (`true`): the
+    /// same integral by another sum, for comparisons.
+    pub fn allow_end_path(&mut self, allow: bool) {
+        self.end_path = allow && self.end_allowed;
     }
 }
 
@@ -274,7 +314,7 @@ pub struct Raycaster {
     /// One pipeline per combination of stepper, enhancers and shading that
     /// a frame has used (G10 §5: a kernel specialised for what the scene
     /// uses), built when first needed.
-    pipelines: HashMap<(KernelKey, [bool; 6]), wgpu::ComputePipeline>,
+    pipelines: HashMap<(KernelKey, [bool; 7]), wgpu::ComputePipeline>,
     /// The pool holds f32 values (else 8-bit codes).
     float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
@@ -561,9 +601,9 @@ impl Raycaster {
         &mut self,
         gpu: &Gpu,
         kernel: &KernelKey,
-        flags: [bool; 6],
+        flags: [bool; 7],
     ) -> Result<&wgpu::ComputePipeline> {
-        let [shading, no_data, macrocells, count, multilevel, tricubic] = flags;
+        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint] = flags;
         let key = (kernel.clone(), flags);
         if !self.pipelines.contains_key(&key) {
             let source = shader::kernel(kernel)?;
@@ -584,6 +624,7 @@ impl Raycaster {
                 ("COUNT_SAMPLES", flag(count)),
                 ("MULTILEVEL", flag(multilevel)),
                 ("TRICUBIC", flag(tricubic)),
+                ("END_PREINT", flag(end_preint)),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
                 (
@@ -778,6 +819,7 @@ impl Raycaster {
                     settings.count_samples,
                     settings.multilevel.is_some() && !k.iso,
                     settings.tricubic,
+                    tf.end_path,
                 ],
             )?
             .clone();

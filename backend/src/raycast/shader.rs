@@ -80,6 +80,7 @@ pub const OVERRIDES: &[&str] = &[
     "COUNT_SAMPLES",
     "MULTILEVEL",
     "TRICUBIC",
+    "END_PREINT",
 ];
 
 /// One specialised kernel: the stepper and the enhancer chain.
