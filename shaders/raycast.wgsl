@@ -113,8 +113,11 @@ fn cell_span(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, 
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let view = views[gid.z];
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>) {
+    // The view by the workgroup's index (the same as gid.z, the workgroup
+    // being one view deep): a value a compiler knows to be uniform across the
+    // workgroup, so the view is read once for it, not once per invocation.
+    let view = views[wg.z];
     // size.w = 0: every pixel; 1 + k: only quincunx sub-frame k (frame
     // reconstruction, G10 §5), one pixel of each 2×2 quad at its offset.
     var px = gid.xy;
@@ -403,7 +406,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     continue;
                 }
                 var avg: vec4<f32>;
-                if (END_PREINT) {
+                if (GRID_PREINT) {
+                    avg = grid_average(s_prev, s);
+                } else if (END_PREINT) {
                     avg = end_average(e_prev, e);
                 } else {
                     avg = segment_average(0u, frame.counts.w, s_prev, s);

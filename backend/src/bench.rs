@@ -164,6 +164,20 @@ pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
             },
         ));
     }
+    // The 2D pre-integration table (one bilinear fetch a segment): the step
+    // sweep.
+    for s in [0.125, 0.25, 0.5, 1.0] {
+        sweeps.push((
+            "preintegration_2d",
+            s,
+            "full",
+            RenderConfig {
+                step_factor: s,
+                preintegration: parallax_common::config::Preintegration::TwoD,
+                ..base.clone()
+            },
+        ));
+    }
     // The old curve: no empty-space skipping inside bricks.
     for s in [0.125, 0.25, 0.5, 1.0] {
         sweeps.push((
@@ -554,6 +568,7 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
         ("adaptive_step", "full", RGBColor(230, 140, 0)),
         ("multilevel", "full", RGBColor(0, 160, 160)),
         ("tricubic", "full", RGBColor(140, 70, 20)),
+        ("preintegration_2d", "full", RGBColor(120, 0, 200)),
         ("accuracy", "full", BLUE),
         ("early_termination", "full", GREEN),
         ("step_factor", "8-bit", MAGENTA),

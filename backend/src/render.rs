@@ -13,7 +13,7 @@ use crate::reconstruct::{subframe_of, ViewHistory, SUBFRAMES};
 use crate::store::{BrickEncoding, NodeKey, OctreeDb};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{Filter, Interpolation, Mode, RenderConfig, Shading};
+use parallax_common::config::{Filter, Interpolation, Mode, Preintegration, RenderConfig, Shading};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::tools::{Tool, MAX_ENHANCERS};
@@ -331,6 +331,7 @@ impl Renderer {
                 }),
             }),
             tricubic: cfg.filter == Filter::Tricubic,
+            preint_2d: cfg.preintegration == Preintegration::TwoD,
         }
     }
 
@@ -351,6 +352,11 @@ impl Renderer {
         cfg: &RenderConfig,
     ) -> Result<Frame> {
         let start = Instant::now();
+        if cfg.preintegration == Preintegration::TwoD {
+            if let Some(tf) = self.tf.as_mut() {
+                tf.table.build_grid(&self.gpu);
+            }
+        }
         let tf = self
             .tf
             .as_ref()

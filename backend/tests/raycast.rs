@@ -102,6 +102,17 @@ struct Measured {
     feedback: Vec<u32>,
 }
 
+/// How the ray caster looks up a segment's optics.
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Path {
+    /// From the segment's ends, where the table allows (the default).
+    End,
+    /// Per segment from the 1D table.
+    Segment,
+    /// The 2D table, bilinearly (`preintegration = "2d"`).
+    Grid,
+}
+
 fn measure(
     gpu: &Gpu,
     rc: &mut Raycaster,
@@ -109,13 +120,16 @@ fn measure(
     f: &TransferFunction,
     cut: &HashMap<parallax_backend::store::NodeKey, CutNode>,
     pool: &BrickPool,
-    end_path: bool,
+    path: Path,
 ) -> Measured {
     let range = (s.db.summary.value_min, s.db.summary.value_max);
     let (lo, hi) = (range.0 as f64, range.1 as f64);
     let table = PreintTable::new(f, lo, hi, PreintTable::suggested_bins(lo, hi, true)).unwrap();
     let mut gtf = TfTable::new(gpu, &table, f.max_importance());
-    gtf.allow_end_path(end_path);
+    gtf.allow_end_path(path == Path::End);
+    if path == Path::Grid {
+        gtf.build_grid(gpu);
+    }
     let index = SpatialIndex::build(s.db.layout(), cut, range).unwrap();
     let sc = scene(&s.db);
     let view = View::window([40, 32], [0.4, 0.32], [0.02, 0.01, 0.8]);
@@ -123,6 +137,7 @@ fn measure(
         step_factor: 0.125,
         early_termination: 1.0,
         shading: false,
+        preint_2d: path == Path::Grid,
         ..Default::default()
     };
     let mut out = rc
@@ -180,7 +195,7 @@ fn full_detail(filtering: Filtering, bound: f64) {
         let s = setup(kind, 40, BrickEncoding::F32);
         let f = tf();
         let (cut, pool) = full_cut(&gpu, &s.db, true);
-        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool, true);
+        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool, Path::End);
         assert!(m.end_path, "the test transfer function allows the end path");
         let (out, want, e, mx, mean_a) = (m.image, m.reference, m.rmse, m.max, m.mean_alpha);
         let feedback = m.feedback;
@@ -299,7 +314,9 @@ fn traversal_covers_every_path_exactly_once() {
 /// segment, summing whole bins by the running integral or, for extreme
 /// ranges, by the dyadic pyramid; every path matches the reference, and on
 /// the same transfer function the end path and the per-segment path give
-/// the same image. The second transfer function spans 1e-4…0.3 per unit
+/// the same image; the 2D table (`preintegration = "2d"`, bilinear between
+/// its nodes, here the 1D table's own) matches within the same bound. The
+/// second transfer function spans 1e-4…0.3 per unit
 /// (a running integral, too wide for f32 partial bins), the third 1e-6…0.3,
 /// which forces the pyramid.
 #[test]
@@ -318,13 +335,20 @@ fn every_table_path_matches_the_reference() {
         .unwrap()
     };
     let mut by_end = None;
-    for (f, end, prefix, name) in [
-        (tf(), true, true, "end path"),
-        (tf(), false, true, "per segment, running integral"),
-        (spanning(1e-4), true, true, "wide range: running integral"),
-        (spanning(1e-6), true, false, "extreme range: pyramid"),
+    for (f, path, prefix, name) in [
+        (tf(), Path::End, true, "end path"),
+        (tf(), Path::Segment, true, "per segment, running integral"),
+        (tf(), Path::Grid, true, "2D table"),
+        (
+            spanning(1e-4),
+            Path::End,
+            true,
+            "wide range: running integral",
+        ),
+        (spanning(1e-6), Path::End, false, "extreme range: pyramid"),
+        (spanning(1e-6), Path::Grid, false, "extreme range: 2D table"),
     ] {
-        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool, end);
+        let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool, path);
         assert_eq!(m.running_integral, prefix, "{name}");
         assert_eq!(m.end_path, name == "end path", "{name}");
         let (e, mx, mean_a) = (m.rmse, m.max, m.mean_alpha);

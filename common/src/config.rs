@@ -124,6 +124,28 @@ pub struct RenderConfig {
     /// tricubic B-spline of L12 §5.1 (eight trilinear lookups a sample).
     #[serde(default = "trilinear")]
     pub filter: Filter,
+    /// How a segment's average optics are looked up: "exact" (the
+    /// pre-integration table of the transfer function's own breakpoints,
+    /// exact for the linear scalar between samples) or "2d" (the classic 2D
+    /// table over front and back values, Engel et al. 2001, at most 512²
+    /// nodes, bilinear: one texture fetch a sample, faster on devices where
+    /// table reads are dear; its error is in `parallax bench`'s
+    /// work–precision table). "2d" needs filterable f32 textures and falls
+    /// back to "exact" without them.
+    #[serde(default = "exact")]
+    pub preintegration: Preintegration,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Preintegration {
+    Exact,
+    #[serde(rename = "2d")]
+    TwoD,
+}
+
+fn exact() -> Preintegration {
+    Preintegration::Exact
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

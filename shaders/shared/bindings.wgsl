@@ -32,7 +32,7 @@ struct GpuFrame {
     extent: vec4<f32>,    // N·s: the volume's box (data units)
     domain: vec4<f32>,    // B·2^L·s: the root node's box (data units)
     spacing: vec4<f32>,   // s; w = min(s)
-    tf: vec4<f32>,        // table vmin, bin width, bins, 0
+    tf: vec4<f32>,        // table vmin, bin width, bins, nodes per axis of the 2D table (0: none)
     render: vec4<f32>,    // step factor, early-termination opacity, probe offset (root units: 1% of a source voxel), adaptive step (1: L12 Eq. 3)
     light: vec4<f32>,     // Phong ka, kd, ks, shininess
     counts: vec4<u32>,    // B, leaf level L, table levels, running-integral offset (0: none)
@@ -80,6 +80,10 @@ struct Slot {
 @group(0) @binding(10) var<storage, read_write> prediction: array<f32>;
 // Samples taken this frame (COUNT_SAMPLES), a 64-bit count: low, high.
 @group(0) @binding(11) var<storage, read_write> counters: array<atomic<u32>, 4>;
+// The 2D pre-integration table (`preintegration = "2d"`; a 1×1 stand-in
+// otherwise) and its bilinear sampler.
+@group(0) @binding(12) var preint_grid: texture_2d<f32>;
+@group(0) @binding(13) var grid_sampler: sampler;
 
 // The octree's levels (backend/src/store/layout.rs): level l halves axis a
 // against level l − 1 where bit l of frame.splits[a] is set (all three in

@@ -95,6 +95,20 @@ struct TfEnd {
 
 override END_PREINT: bool = false;
 
+// The 2D pre-integration table instead (PreintTable::grid): the averages
+// over segments between its nodes, interpolated bilinearly by the texture
+// unit, one fetch a segment.
+override GRID_PREINT: bool = false;
+
+fn grid_average(sa: f32, sb: f32) -> vec4<f32> {
+    let n = frame.tf.w;
+    let k = (n - 1.0) / frame.tf.z;
+    let ga = clamp((sa - frame.tf.x) / frame.tf.y, 0.0, frame.tf.z) * k;
+    let gb = clamp((sb - frame.tf.x) / frame.tf.y, 0.0, frame.tf.z) * k;
+    return max(textureSampleLevel(preint_grid, grid_sampler, (vec2<f32>(ga, gb) + 0.5) / n, 0.0),
+               vec4<f32>(0.0));
+}
+
 
 fn tf_end(s: f32) -> TfEnd {
     var e: TfEnd;

@@ -30,17 +30,35 @@ struct Leaf {
     cell: vec3<f32>,   // brick coordinates at its level
     slot: u32,
     voxel: vec3<f32>,  // its voxel's edges (data units): spacing · level_scale(level)
+    origin: vec3<i32>, // its slot's first texel in the pool
+    range: vec2<f32>,  // its data range: value = range.x + range.y · stored
+    to_local: vec3<f32>,  // 1 / voxel: data units → texels
+    shift: vec3<f32>,     // the leaf's first texel centre, −cell·B + OVERLAP − ½
 }
 
-// The leaf `node` of `level` at brick coordinates `cell`, its data in `slot`.
+// The leaf `node` of `level` at brick coordinates `cell`, its data in `slot`
+// (where it has data: the slot's place and range are read once per leaf,
+// not per sample).
 fn make_leaf(node: u32, level: u32, cell: vec3<f32>, slot: u32) -> Leaf {
-    return Leaf(node, level, cell, slot, frame.spacing.xyz * level_scale(level));
+    let voxel = frame.spacing.xyz * level_scale(level);
+    var leaf = Leaf(node, level, cell, slot, voxel, vec3<i32>(0), vec2<f32>(0.0), 1.0 / voxel,
+                    vec3<f32>(OVERLAP - 0.5) - cell * f32(frame.counts.x));
+    if (slot != NO_SLOT) {
+        leaf.origin = slot_origin(slot);
+        leaf.range = slots[slot].range.xy;
+    }
+    return leaf;
 }
 
+// The slot's place in the pool, by f32 arithmetic (exact below 2²⁴ slots):
+// integer division by a non-constant has no SIMD instruction on a CPU.
 fn slot_origin(slot: u32) -> vec3<i32> {
-    let p = frame.pool;
-    let s = vec3<u32>(slot % p.x, (slot / p.x) % p.y, slot / (p.x * p.y));
-    return vec3<i32>(s * p.w);
+    let p = vec3<f32>(frame.pool.xyz);
+    let i = f32(slot);
+    let row = floor((i + 0.5) / p.x);
+    let layer = floor((row + 0.5) / p.y);
+    let s = vec3<f32>(i - row * p.x, row - layer * p.y, layer);
+    return vec3<i32>(s) * i32(frame.pool.w);
 }
 
 fn tap(o: vec3<i32>, i: vec3<i32>) -> f32 {
@@ -92,11 +110,9 @@ fn tricubic(o: vec3<i32>, x: vec3<f32>) -> f32 {
 }
 
 fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
-    let voxel = leaf.voxel;
     let side = f32(frame.pool.w);
-    let local = clamp(p / voxel - leaf.cell * f32(frame.counts.x) + vec3<f32>(OVERLAP - 0.5),
-                      vec3<f32>(0.0), vec3<f32>(side - 1.0));
-    let o = slot_origin(leaf.slot);
+    let local = clamp(p * leaf.to_local + leaf.shift, vec3<f32>(0.0), vec3<f32>(side - 1.0));
+    let o = leaf.origin;
     var v: f32;
     if (NO_DATA) {
         let f0 = floor(local);
@@ -124,8 +140,7 @@ fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
     } else {
         v = trilinear(o, local);
     }
-    let r = slots[leaf.slot].range;
-    return r.x + r.y * v;
+    return leaf.range.x + leaf.range.y * v;
 }
 
 // One axis of the gradient where samples may lack data: central where both

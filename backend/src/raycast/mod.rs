@@ -46,8 +46,31 @@ pub struct TfTable {
     /// other in every DVR channel.
     end_path: bool,
     end_allowed: bool,
+    /// The CPU table, kept to build the 2D table from on demand.
+    source: PreintTable,
+    /// The 2D table (`preintegration = "2d"`), made when first asked for,
+    /// and its nodes per axis.
+    grid: Option<(wgpu::Texture, wgpu::TextureView, u32)>,
     /// Which table this is (a bind group names one table).
     id: u64,
+}
+
+/// An n × n rgba32float texture for the 2D pre-integration table.
+fn grid_descriptor(label: &str, n: u32) -> wgpu::TextureDescriptor<'_> {
+    wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: n,
+            height: n,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Float,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING,
+        view_formats: &[],
+    }
 }
 
 /// A process-wide serial number for GPU resources a bind group refers to.
@@ -136,6 +159,8 @@ impl TfTable {
             prefix_offset,
             end_path: end_allowed,
             end_allowed,
+            source: table.clone(),
+            grid: None,
             aux_base,
             aux_prefix,
             max_importance: max_importance as f32,
@@ -196,6 +221,26 @@ impl TfTable {
         self.end_path
     }
 
+    /// Makes the 2D pre-integration table (PreintTable::grid) on the GPU,
+    /// once; `preintegration = "2d"` samples it bilinearly.
+    pub fn build_grid(&mut self, gpu: &Gpu) {
+        if self.grid.is_some() {
+            return;
+        }
+        let n = self.source.grid_nodes() as u32;
+        let data = self.source.grid();
+        let texture = gpu.device.create_texture_with_data(
+            &gpu.queue,
+            &grid_descriptor("2D pre-integration table", n),
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(&data),
+        );
+        let view = texture.create_view(&Default::default());
+        self.grid = Some((texture, view, n));
+        // Bind groups made for this table lack the new texture.
+        self.id = next_resource_id();
+    }
+
     /// Pre-integrates per segment even where the table allows the end path
     /// (`false`), or from the ends again where it allows it (`true`): the
     /// same integral by another sum, for comparisons.
@@ -242,6 +287,9 @@ pub struct RenderSettings {
     pub multilevel: Option<Multilevel>,
     /// Tricubic B-spline filtering (L12 §5.1) instead of trilinear.
     pub tricubic: bool,
+    /// Segment optics from the 2D pre-integration table, bilinearly (the
+    /// table must have been made: [`TfTable::build_grid`]).
+    pub preint_2d: bool,
 }
 
 /// What multilevel sampling needs to know of refinement: the same footprint
@@ -273,6 +321,7 @@ impl Default for RenderSettings {
             adaptive_step: false,
             multilevel: None,
             tricubic: false,
+            preint_2d: false,
         }
     }
 }
@@ -311,10 +360,16 @@ pub struct Raycaster {
     pipeline_layout: wgpu::PipelineLayout,
     sampler: wgpu::Sampler,
     hw_filter: bool,
+    /// The 2D pre-integration table's sampler (bilinear where the device
+    /// filters f32 textures; without that, "2d" falls back to "exact"), and
+    /// a 1×1 stand-in bound when a table has none.
+    grid_sampler: wgpu::Sampler,
+    grid_filterable: bool,
+    no_grid: wgpu::TextureView,
     /// One pipeline per combination of stepper, enhancers and shading that
     /// a frame has used (G10 §5: a kernel specialised for what the scene
     /// uses), built when first needed.
-    pipelines: HashMap<(KernelKey, [bool; 7]), wgpu::ComputePipeline>,
+    pipelines: HashMap<(KernelKey, [bool; 8]), wgpu::ComputePipeline>,
     /// The pool holds f32 values (else 8-bit codes).
     float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
@@ -487,6 +542,51 @@ fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
+fn texture(
+    binding: u32,
+    view_dimension: wgpu::TextureViewDimension,
+    filterable: bool,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+fn sampler(binding: u32, filtering: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Sampler(if filtering {
+            wgpu::SamplerBindingType::Filtering
+        } else {
+            wgpu::SamplerBindingType::NonFiltering
+        }),
+        count: None,
+    }
+}
+
+/// A clamping sampler, bilinear or nearest.
+fn make_sampler(gpu: &Gpu, label: &str, linear: bool) -> wgpu::Sampler {
+    let filter = if linear {
+        wgpu::FilterMode::Linear
+    } else {
+        wgpu::FilterMode::Nearest
+    };
+    gpu.device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some(label),
+        mag_filter: filter,
+        min_filter: filter,
+        ..Default::default()
+    })
+}
+
 impl Raycaster {
     /// A ray caster for pools of `float` (r32float) or 8-bit bricks. Asked
     /// for hardware filtering of a format the device cannot filter, it
@@ -498,6 +598,10 @@ impl Raycaster {
                     .device
                     .features()
                     .contains(wgpu::Features::FLOAT32_FILTERABLE));
+        let grid_filterable = gpu
+            .device
+            .features()
+            .contains(wgpu::Features::FLOAT32_FILTERABLE);
         let bind_layout = gpu
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -515,32 +619,12 @@ impl Raycaster {
                     },
                     storage(1, true),
                     storage(2, true),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 3,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float {
-                                filterable: hw_filter,
-                            },
-                            view_dimension: wgpu::TextureViewDimension::D3,
-                            multisampled: false,
-                        },
-                        count: None,
-                    },
+                    texture(3, wgpu::TextureViewDimension::D3, hw_filter),
                     storage(4, true),
                     storage(5, true),
                     storage(6, false),
                     storage(7, false),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 8,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Sampler(if hw_filter {
-                            wgpu::SamplerBindingType::Filtering
-                        } else {
-                            wgpu::SamplerBindingType::NonFiltering
-                        }),
-                        count: None,
-                    },
+                    sampler(8, hw_filter),
                     wgpu::BindGroupLayoutEntry {
                         binding: 9,
                         visibility: wgpu::ShaderStages::COMPUTE,
@@ -553,19 +637,16 @@ impl Raycaster {
                     },
                     storage(10, false),
                     storage(11, false),
+                    texture(12, wgpu::TextureViewDimension::D2, grid_filterable),
+                    sampler(13, grid_filterable),
                 ],
             });
-        let filter = if hw_filter {
-            wgpu::FilterMode::Linear
-        } else {
-            wgpu::FilterMode::Nearest
-        };
-        let sampler = gpu.device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("brick pool"),
-            mag_filter: filter,
-            min_filter: filter,
-            ..Default::default()
-        });
+        let grid_sampler = make_sampler(gpu, "2D pre-integration table", grid_filterable);
+        let no_grid = gpu
+            .device
+            .create_texture(&grid_descriptor("no 2D pre-integration table", 1))
+            .create_view(&Default::default());
+        let sampler = make_sampler(gpu, "brick pool", hw_filter);
         let pipeline_layout = gpu
             .device
             .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -584,6 +665,9 @@ impl Raycaster {
             pipeline_layout,
             sampler,
             hw_filter,
+            grid_sampler,
+            grid_filterable,
+            no_grid,
             pipelines: HashMap::new(),
             float_pool,
             tools,
@@ -601,9 +685,10 @@ impl Raycaster {
         &mut self,
         gpu: &Gpu,
         kernel: &KernelKey,
-        flags: [bool; 7],
+        flags: [bool; 8],
     ) -> Result<&wgpu::ComputePipeline> {
-        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint] = flags;
+        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint, grid_preint] =
+            flags;
         let key = (kernel.clone(), flags);
         if !self.pipelines.contains_key(&key) {
             let source = shader::kernel(kernel)?;
@@ -625,6 +710,7 @@ impl Raycaster {
                 ("MULTILEVEL", flag(multilevel)),
                 ("TRICUBIC", flag(tricubic)),
                 ("END_PREINT", flag(end_preint)),
+                ("GRID_PREINT", flag(grid_preint)),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
                 (
@@ -793,6 +879,16 @@ impl Raycaster {
                         binding: 11,
                         resource: fr.counters.as_entire_binding(),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 12,
+                        resource: wgpu::BindingResource::TextureView(
+                            tf.grid.as_ref().map_or(&self.no_grid, |g| &g.1),
+                        ),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 13,
+                        resource: wgpu::BindingResource::Sampler(&self.grid_sampler),
+                    },
                 ],
             });
             self.frame.bind = Some((bind, tf.id, pool.id));
@@ -808,6 +904,7 @@ impl Raycaster {
             && !k.iso
             && k.enhancers.iter().all(|&e| e == EnhancerKind::PassThrough);
         let macrocells = settings.macrocells && plain && pool.cells.per_axis > 0;
+        let grid = settings.preint_2d && self.grid_filterable && !k.iso && tf.grid.is_some();
         let pipeline = self
             .pipeline(
                 gpu,
@@ -819,7 +916,8 @@ impl Raycaster {
                     settings.count_samples,
                     settings.multilevel.is_some() && !k.iso,
                     settings.tricubic,
-                    tf.end_path,
+                    tf.end_path && !grid,
+                    grid,
                 ],
             )?
             .clone();
@@ -943,7 +1041,7 @@ impl Raycaster {
                 tf.layout.vmin as f32,
                 tf.layout.bin_width as f32,
                 tf.layout.n_bins as f32,
-                0.0,
+                tf.grid.as_ref().map_or(0.0, |g| g.2 as f32),
             ],
             render: [
                 s.step_factor,

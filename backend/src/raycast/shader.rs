@@ -81,6 +81,7 @@ pub const OVERRIDES: &[&str] = &[
     "MULTILEVEL",
     "TRICUBIC",
     "END_PREINT",
+    "GRID_PREINT",
 ];
 
 /// One specialised kernel: the stepper and the enhancer chain.

@@ -546,6 +546,39 @@ impl PreintTable {
         }
     }
 
+    /// Node count along each axis of [`Self::grid`]: the table's nodes where
+    /// there are at most 512, else 512 spread evenly over [vmin, vmax].
+    pub fn grid_nodes(&self) -> usize {
+        self.n_bins.min(511) + 1
+    }
+
+    /// The classic 2D pre-integration table (Engel, Kraus and Ertl, "High-
+    /// quality pre-integrated volume rendering using hardware-accelerated
+    /// pixel shading", 2001) of the DVR channels: with n = [`Self::grid_nodes`]
+    /// nodes s_i = vmin + i·(vmax − vmin)/(n − 1), entry i + n·j is the
+    /// average of (τ, k̃r, k̃g, k̃b) over the segment from s_i to s_j, exact
+    /// (this table's [`Self::average`]) at the nodes; a renderer
+    /// interpolates it bilinearly between them.
+    pub fn grid(&self) -> Vec<[f32; 4]> {
+        let n = self.grid_nodes();
+        let s = |i: usize| self.vmin + (self.vmax - self.vmin) * i as f64 / (n - 1) as f64;
+        let dvr = [
+            Channel::Tau,
+            Channel::EmissionR,
+            Channel::EmissionG,
+            Channel::EmissionB,
+        ];
+        let mut out = vec![[0f32; 4]; n * n];
+        for j in 0..n {
+            for i in 0..=j {
+                let v: [f32; 4] = std::array::from_fn(|c| self.average(dvr[c], s(i), s(j)) as f32);
+                out[i + n * j] = v;
+                out[j + n * i] = v;
+            }
+        }
+        out
+    }
+
     /// Averages of every channel over the data-value segment [a, b].
     pub fn segment(&self, a: f64, b: f64) -> SegmentOptics {
         let avg = |c| self.average(c, a, b);
