@@ -220,263 +220,317 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
     // Distance travelled before the last refraction bend (the adaptive
     // step's t counts from the eye, not from the bend).
     var t_base = 0.0;
-    for (var visited = 0u; visited < MAX_NODES_PER_RAY; visited = visited + 1u) {
-        let n = index[node];
-        let level = n.data >> 24u;
-        let cells = level_cells(level);
-        let size = frame.domain.xyz / cells;
-        let cell = clamp(floor(probe * cells), vec3<f32>(0.0), vec3<f32>(cells - 1.0));
-        let lo = cell * size;
-        let hi = lo + size;
-        let tx = select(select((lo - o) * inv_d, (hi - o) * inv_d, d > vec3<f32>(0.0)),
-                        vec3<f32>(3.0e38), abs(d) < vec3<f32>(1e-30));
-        var t_exit = min(min(tx.x, tx.y), tx.z);
-        var axis = 0u;
-        if (tx.y <= tx.x && tx.y <= tx.z) {
-            axis = 1u;
-        } else if (tx.z <= tx.x && tx.z <= tx.y) {
-            axis = 2u;
-        }
-        if (ISO && snap) {
-            let te = select((hi - o) * inv_d, (lo - o) * inv_d, d > vec3<f32>(0.0));
-            let te_m = select(te, vec3<f32>(-3.0e38), abs(d) < vec3<f32>(1e-30));
-            t = clamp(max(max(te_m.x, te_m.y), te_m.z), entry, t);
-            snap = false;
-        }
-        let last = t_exit >= span.y;
-        t_exit = clamp(t_exit, t, span.y);
-
-        let slot = n.data & NO_SLOT;
-        var bent = false;
-        if (slot != NO_SLOT && t_exit > t) {
-            let leaf = make_leaf(node, level, cell, slot);
-            // Multilevel sampling blends in coarser levels only in leaves
-            // that the view needs coarser somewhere along the ray (the
-            // footprint grows monotonically along a ray from the observer;
-            // s(|z|) is convex along it): the others sample as usual and
-            // may skip their empty macrocells.
-            var lv = Levels(leaf, leaf, leaf);
-            var blend = false;
-            if (MULTILEVEL && !ISO) {
-                lv = levels_of(leaf, n);
-                blend = lv.up.slot != NO_SLOT
-                    && max(lod_offset(level, o + d * t), lod_offset(level, o + d * t_exit)) > 0.0;
-            }
-            // Sampling rate matched to the leaf's level.
-            let voxel = min(min(leaf.voxel.x, leaf.voxel.y), leaf.voxel.z);
-            var h = step_factor * voxel;
-            if (frame.render.w > 0.5) {
-                // L12 §4.4 Eq. 3: λ = t·sin(θ/2), the radius of the pixel's
-                // cone at distance t from the eye (data units, as the ray's
-                // parameter), taken at the leaf's entry so that the samples
-                // of a leaf stay evenly spaced; step_factor 0.5 is λ itself.
-                h = max(2.0 * step_factor * (t_base + t) * sin_half, voxel / 64.0);
-            }
-            if (ISO && sparse) {
-                h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slots[slot].range.z));
-            }
-            // Samples fall at t + k·h (and where the leaf ends or a tool's
-            // boundary lies).
-            var tc = t;
-            var k = 1u;
-            // Macrocells: the last sample index to march to (after it the
-            // march jumps to the leaf's exit), and whether the first sample
-            // taken only starts the march (its segment lies in empty cells).
-            var k_end = 0xFFFFFFFFu;
-            var skip_first = false;
-            if (MACROCELLS && !blend) {
-                // Segments inside empty macrocells add exactly nothing: march
-                // only from the last sample before the first non-empty cell
-                // to the first sample after the last one, on the same grid
-                // (the samples computed by the same expressions, so the image
-                // is bit for bit the one without macrocells).
-                let cells_on = cell_span(leaf, o, d, inv_d, t, t_exit);
-                if (cells_on.x > cells_on.y) {
-                    // Every cell it crosses is empty: only the value at the
-                    // exit is needed, for the next leaf's first segment.
-                    k = 0xFFFFFFFFu;
-                    skip_first = true;
-                } else {
-                    var k0 = floor((cells_on.x - t) / h);
-                    if (k0 >= 1.0 && t + k0 * h > cells_on.x) {
-                        k0 = k0 - 1.0;
-                    }
-                    if (k0 >= 1.0) {
-                        k = u32(k0);
-                        skip_first = true;
-                    }
-                    var k1 = ceil((cells_on.y - t) / h);
-                    if (t + k1 * h < cells_on.y) {
-                        k1 = k1 + 1.0;
-                    }
-                    k_end = u32(clamp(k1, 1.0, 4.0e9));
-                }
-            }
-            if (!have_prev && !skip_first) {
-                s_prev = sample_levels(lv, blend, o + d * t);
-                if (!ISO) {
-                    e_prev = tf_end(s_prev);
-                }
-                have_prev = true;
-                n_samples = n_samples + 1u;
-            }
-            loop {
-                let tk = t + f32(k) * h;
-                var tn = min(tk, t_exit);
-                if (HAS_BREAKS) {
-                    tn = min(tn, next_break(&ray, tc));
-                }
-                let at_k = k;
-                if (tn >= tk) {
-                    k = k + 1u;
-                }
-                if (MACROCELLS && at_k >= k_end) {
-                    // Past the last non-empty cell: next, the exit.
-                    k = 0xFFFFFFFFu;
-                }
-                let s = sample_levels(lv, blend, o + d * tn);
-                n_samples = n_samples + 1u;
-                var e: TfEnd;
-                if (!ISO) {
-                    e = tf_end(s);
-                }
-                if (MACROCELLS && skip_first) {
-                    skip_first = false;
-                    have_prev = true;
-                    s_prev = s;
-                    e_prev = e;
-                    tc = tn;
-                    if (tc >= t_exit) {
-                        break;
-                    }
-                    continue;
-                }
-                if (ISO) {
-                    // The first crossing of the isovalue, opaque and shaded;
-                    // a tool may cut it away (opacity 0) or fade it.
-                    if (iso_brackets(s_prev, s)) {
-                        let th = iso_refine(leaf, o, d, tc, tn, s_prev);
-                        var smp: Sample;
-                        smp.pos = o + d * th;
-                        smp.len = 0.0;
-                        smp.dir = d;
-                        smp.scalar = frame.iso.x;
-                        smp.tau = 1.0;
-                        smp.emission = frame.iso.yzw;
-                        smp.alpha_scale = 1.0;
-                        smp.alpha_mix = 0.0;
-                        smp.material = frame.light;
-                        if (NEEDS_GRADIENT) {
-                            smp.gradient = gradient(leaf, smp.pos);
-                        }
-                        chain_sample(&smp);
-                        let a = clamp(mix(smp.alpha_scale, 1.0, smp.alpha_mix), 0.0, 1.0);
-                        if (a > 0.0) {
-                            var shade = 1.0;
-                            if (SHADING) {
-                                let g = gradient(leaf, smp.pos);
-                                let gl = length(g);
-                                if (gl > 1e-6) {
-                                    let diff = abs(dot(g / gl, d));
-                                    let m = smp.material;
-                                    shade = m.x + m.y * diff + m.z * pow(diff, m.w);
-                                }
-                            }
-                            over(&acc, vec4<f32>(max(smp.emission, vec3<f32>(0.0)) * shade * a, a));
-                            if (hit_t < 0.0) {
-                                hit_t = th;
-                            }
-                        }
-                    }
-                    s_prev = s;
-                    tc = tn;
-                    if (tc >= t_exit || terminated(acc)) {
-                        break;
-                    }
-                    continue;
-                }
-                if (NO_DATA && !(has_data(s) && has_data(s_prev))) {
-                    // A segment with an end that lacks data adds nothing.
-                    s_prev = s;
-                    e_prev = e;
-                    tc = tn;
-                    if (tc >= t_exit) {
-                        break;
-                    }
-                    continue;
-                }
-                var avg: vec4<f32>;
-                if (GRID_PREINT) {
-                    avg = grid_average(s_prev, s);
-                } else if (END_PREINT) {
-                    avg = end_average(e_prev, e);
-                } else {
-                    avg = segment_average(0u, frame.counts.w, s_prev, s);
-                }
-                var smp: Sample;
-                smp.pos = o + d * (0.5 * (tc + tn));
-                smp.len = tn - tc;
-                smp.dir = d;
-                smp.scalar = s;
-                smp.tau = avg.x;
-                smp.emission = avg.yzw;
-                smp.alpha_scale = 1.0;
-                smp.alpha_mix = 0.0;
-                smp.material = frame.light;
-                if (NEEDS_AUX) {
-                    let aux = segment_average(frame.aux.x, frame.aux.y, s_prev, s);
-                    smp.importance = aux.x;
-                    smp.refraction = aux.y;
-                }
-                if (NEEDS_GRADIENT) {
-                    smp.gradient = gradient_levels(lv, blend, smp.pos);
-                }
-                chain_sample(&smp);
-                var shade = 1.0;
-                // A transparent segment adds nothing: no gradient needed.
-                if (SHADING && (smp.tau > 0.0 || smp.alpha_mix > 0.0)) {
-                    var g = smp.gradient;
-                    if (!NEEDS_GRADIENT) {
-                        g = gradient_levels(lv, blend, smp.pos);
-                    }
-                    let gl = length(g);
-                    if (gl > 1e-6) {
-                        // Two-sided Phong with a headlight.
-                        let diff = abs(dot(g / gl, d));
-                        let m = smp.material;
-                        shade = m.x + m.y * diff + m.z * pow(diff, m.w);
-                    }
-                }
-                accumulate(&acc, segment_optics(smp, shade), smp);
-                s_prev = s;
-                e_prev = e;
-                tc = tn;
-                if (REFRACTION) {
-                    // Snell's law where the refraction index changes, about
-                    // the gradient at the end of the segment; the ray then
-                    // goes on from there in its new direction.
-                    if (nu_prev >= 0.0 && abs(smp.refraction - nu_prev) > 1e-6) {
-                        let p = o + d * tc;
-                        let nd = snell(d, gradient(leaf, p), nu_prev, smp.refraction);
-                        if (any(nd != d)) {
-                            t_base = t_base + tc;
-                            o = p;
-                            d = nd;
-                            bent = true;
-                        }
-                    }
-                    nu_prev = smp.refraction;
-                }
-                if (bent || tc >= t_exit || terminated(acc)) {
+    // The node the loop is at and its box; `advance`: leave it first (it
+    // has been integrated).
+    var n: IndexNode;
+    var level = 0u;
+    var cell = vec3<f32>(0.0);
+    var lo = vec3<f32>(0.0);
+    var hi = vec3<f32>(0.0);
+    var t_exit = 0.0;
+    var axis = 0u;
+    var last = false;
+    var slot = NO_SLOT;
+    var advance = false;
+    var visited = 0u;
+    loop {
+        // Through the nodes with nothing to integrate by traversal alone,
+        // to the next leaf with data (or the end): a CPU device runs the
+        // leaf's whole body below for all its lanes whenever one lane needs
+        // it, so empty space must not take that path.
+        var done = false;
+        loop {
+            if (advance) {
+                if (last || terminated(acc)) {
+                    done = true;
                     break;
                 }
+                // Leave through the exit face and follow its neighbour pointer.
+                let next = neighbour(n, axis, d[axis] > 0.0);
+                if (next == NONE16) {
+                    done = true;
+                    break;
+                }
+                t = t_exit;
+                // Probe just across the exit face, inside this leaf's face on the
+                // other axes: a point the neighbour's box is sure to contain.
+                let eps = frame.render.z;
+                let lo_u = lo / frame.domain.xyz + eps;
+                let hi_u = hi / frame.domain.xyz - eps;
+                probe = clamp((o + d * t) / frame.domain.xyz, lo_u, hi_u);
+                if (d[axis] > 0.0) {
+                    probe[axis] = hi_u[axis] + 2.0 * eps;
+                } else {
+                    probe[axis] = lo_u[axis] - 2.0 * eps;
+                }
+                node = descend(next, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
             }
-            // Visibility feedback (G10 §5): this leaf contributed.
-            feedback[node] = 1u;
-        } else {
+            advance = true;
+            visited = visited + 1u;
+            if (visited > MAX_NODES_PER_RAY) {
+                done = true;
+                break;
+            }
+            n = index[node];
+            level = n.data >> 24u;
+            let cells = level_cells(level);
+            let size = frame.domain.xyz / cells;
+            cell = clamp(floor(probe * cells), vec3<f32>(0.0), vec3<f32>(cells - 1.0));
+            lo = cell * size;
+            hi = lo + size;
+            let tx = select(select((lo - o) * inv_d, (hi - o) * inv_d, d > vec3<f32>(0.0)),
+                            vec3<f32>(3.0e38), abs(d) < vec3<f32>(1e-30));
+            t_exit = min(min(tx.x, tx.y), tx.z);
+            axis = 0u;
+            if (tx.y <= tx.x && tx.y <= tx.z) {
+                axis = 1u;
+            } else if (tx.z <= tx.x && tx.z <= tx.y) {
+                axis = 2u;
+            }
+            if (ISO && snap) {
+                let te = select((hi - o) * inv_d, (lo - o) * inv_d, d > vec3<f32>(0.0));
+                let te_m = select(te, vec3<f32>(-3.0e38), abs(d) < vec3<f32>(1e-30));
+                t = clamp(max(max(te_m.x, te_m.y), te_m.z), entry, t);
+                snap = false;
+            }
+            last = t_exit >= span.y;
+            t_exit = clamp(t_exit, t, span.y);
+
+            slot = n.data & NO_SLOT;
+            if (slot != NO_SLOT && t_exit > t) {
+                break;
+            }
             // Nothing to integrate here; the next brick restarts its segment.
             have_prev = false;
         }
+        if (done) {
+            break;
+        }
+        var bent = false;
+        let leaf = make_leaf(node, level, cell, slot);
+        // Multilevel sampling blends in coarser levels only in leaves
+        // that the view needs coarser somewhere along the ray (the
+        // footprint grows monotonically along a ray from the observer;
+        // s(|z|) is convex along it): the others sample as usual and
+        // may skip their empty macrocells.
+        var lv = Levels(leaf, leaf, leaf);
+        var blend = false;
+        if (MULTILEVEL && !ISO) {
+            lv = levels_of(leaf, n);
+            blend = lv.up.slot != NO_SLOT
+                && max(lod_offset(level, o + d * t), lod_offset(level, o + d * t_exit)) > 0.0;
+        }
+        // Sampling rate matched to the leaf's level.
+        let voxel = min(min(leaf.voxel.x, leaf.voxel.y), leaf.voxel.z);
+        var h = step_factor * voxel;
+        if (frame.render.w > 0.5) {
+            // L12 §4.4 Eq. 3: λ = t·sin(θ/2), the radius of the pixel's
+            // cone at distance t from the eye (data units, as the ray's
+            // parameter), taken at the leaf's entry so that the samples
+            // of a leaf stay evenly spaced; step_factor 0.5 is λ itself.
+            h = max(2.0 * step_factor * (t_base + t) * sin_half, voxel / 64.0);
+        }
+        if (ISO && sparse) {
+            h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slots[slot].range.z));
+        }
+        // Samples fall at t + k·h (and where the leaf ends or a tool's
+        // boundary lies).
+        var tc = t;
+        var k = 1u;
+        // Macrocells: the last sample index to march to (after it the
+        // march jumps to the leaf's exit), and whether the first sample
+        // taken only starts the march (its segment lies in empty cells).
+        var k_end = 0xFFFFFFFFu;
+        var skip_first = false;
+        if (MACROCELLS && !blend) {
+            // Segments inside empty macrocells add exactly nothing: march
+            // only from the last sample before the first non-empty cell
+            // to the first sample after the last one, on the same grid
+            // (the samples computed by the same expressions, so the image
+            // is bit for bit the one without macrocells).
+            let cells_on = cell_span(leaf, o, d, inv_d, t, t_exit);
+            if (cells_on.x > cells_on.y) {
+                // Every cell it crosses is empty: only the value at the
+                // exit is needed, for the next leaf's first segment.
+                k = 0xFFFFFFFFu;
+                skip_first = true;
+            } else {
+                var k0 = floor((cells_on.x - t) / h);
+                if (k0 >= 1.0 && t + k0 * h > cells_on.x) {
+                    k0 = k0 - 1.0;
+                }
+                if (k0 >= 1.0) {
+                    k = u32(k0);
+                    skip_first = true;
+                }
+                var k1 = ceil((cells_on.y - t) / h);
+                if (t + k1 * h < cells_on.y) {
+                    k1 = k1 + 1.0;
+                }
+                k_end = u32(clamp(k1, 1.0, 4.0e9));
+            }
+        }
+        if (!have_prev && !skip_first) {
+            // The leaf's entry value starts the march: the loop's first
+            // sample, at t + 0·h (one sampling path in the kernel, not
+            // two: a CPU device runs every branch of the loop body for
+            // all its lanes, taken or not).
+            k = 0u;
+            skip_first = true;
+        }
+        loop {
+            let tk = t + f32(k) * h;
+            var tn = min(tk, t_exit);
+            if (HAS_BREAKS) {
+                tn = min(tn, next_break(&ray, tc));
+            }
+            let at_k = k;
+            if (tn >= tk) {
+                k = k + 1u;
+            }
+            if (MACROCELLS && at_k >= k_end) {
+                // Past the last non-empty cell: next, the exit.
+                k = 0xFFFFFFFFu;
+            }
+            let s = sample_levels(lv, blend, o + d * tn);
+            n_samples = n_samples + 1u;
+            var e: TfEnd;
+            if (!ISO) {
+                e = tf_end(s);
+            }
+            if (skip_first) {
+                skip_first = false;
+                have_prev = true;
+                s_prev = s;
+                e_prev = e;
+                tc = tn;
+                if (tc >= t_exit) {
+                    break;
+                }
+                continue;
+            }
+            if (ISO) {
+                // The first crossing of the isovalue, opaque and shaded;
+                // a tool may cut it away (opacity 0) or fade it.
+                if (iso_brackets(s_prev, s)) {
+                    let th = iso_refine(leaf, o, d, tc, tn, s_prev);
+                    var smp: Sample;
+                    smp.pos = o + d * th;
+                    smp.len = 0.0;
+                    smp.dir = d;
+                    smp.scalar = frame.iso.x;
+                    smp.tau = 1.0;
+                    smp.emission = frame.iso.yzw;
+                    smp.alpha_scale = 1.0;
+                    smp.alpha_mix = 0.0;
+                    smp.material = frame.light;
+                    if (NEEDS_GRADIENT) {
+                        smp.gradient = gradient(leaf, smp.pos);
+                    }
+                    chain_sample(&smp);
+                    let a = clamp(mix(smp.alpha_scale, 1.0, smp.alpha_mix), 0.0, 1.0);
+                    if (a > 0.0) {
+                        var shade = 1.0;
+                        if (SHADING) {
+                            let g = gradient(leaf, smp.pos);
+                            let gl = length(g);
+                            if (gl > 1e-6) {
+                                let diff = abs(dot(g / gl, d));
+                                let m = smp.material;
+                                shade = m.x + m.y * diff + m.z * pow(diff, m.w);
+                            }
+                        }
+                        over(&acc, vec4<f32>(max(smp.emission, vec3<f32>(0.0)) * shade * a, a));
+                        if (hit_t < 0.0) {
+                            hit_t = th;
+                        }
+                    }
+                }
+                s_prev = s;
+                tc = tn;
+                if (tc >= t_exit || terminated(acc)) {
+                    break;
+                }
+                continue;
+            }
+            if (NO_DATA && !(has_data(s) && has_data(s_prev))) {
+                // A segment with an end that lacks data adds nothing.
+                s_prev = s;
+                e_prev = e;
+                tc = tn;
+                if (tc >= t_exit) {
+                    break;
+                }
+                continue;
+            }
+            var avg: vec4<f32>;
+            if (GRID_PREINT) {
+                avg = grid_average(s_prev, s);
+            } else if (END_PREINT) {
+                avg = end_average(e_prev, e);
+            } else {
+                avg = segment_average(0u, frame.counts.w, s_prev, s);
+            }
+            var smp: Sample;
+            smp.pos = o + d * (0.5 * (tc + tn));
+            smp.len = tn - tc;
+            smp.dir = d;
+            smp.scalar = s;
+            smp.tau = avg.x;
+            smp.emission = avg.yzw;
+            smp.alpha_scale = 1.0;
+            smp.alpha_mix = 0.0;
+            smp.material = frame.light;
+            if (NEEDS_AUX) {
+                let aux = segment_average(frame.aux.x, frame.aux.y, s_prev, s);
+                smp.importance = aux.x;
+                smp.refraction = aux.y;
+            }
+            if (NEEDS_GRADIENT) {
+                smp.gradient = gradient_levels(lv, blend, smp.pos);
+            }
+            chain_sample(&smp);
+            var shade = 1.0;
+            // A transparent segment adds nothing: no gradient needed.
+            if (SHADING && (smp.tau > 0.0 || smp.alpha_mix > 0.0)) {
+                var g = smp.gradient;
+                if (!NEEDS_GRADIENT) {
+                    g = gradient_levels(lv, blend, smp.pos);
+                }
+                let gl = length(g);
+                if (gl > 1e-6) {
+                    // Two-sided Phong with a headlight.
+                    let diff = abs(dot(g / gl, d));
+                    let m = smp.material;
+                    shade = m.x + m.y * diff + m.z * pow(diff, m.w);
+                }
+            }
+            accumulate(&acc, segment_optics(smp, shade), smp);
+            s_prev = s;
+            e_prev = e;
+            tc = tn;
+            if (REFRACTION) {
+                // Snell's law where the refraction index changes, about
+                // the gradient at the end of the segment; the ray then
+                // goes on from there in its new direction.
+                if (nu_prev >= 0.0 && abs(smp.refraction - nu_prev) > 1e-6) {
+                    let p = o + d * tc;
+                    let nd = snell(d, gradient(leaf, p), nu_prev, smp.refraction);
+                    if (any(nd != d)) {
+                        t_base = t_base + tc;
+                        o = p;
+                        d = nd;
+                        bent = true;
+                    }
+                }
+                nu_prev = smp.refraction;
+            }
+            if (bent || tc >= t_exit || terminated(acc)) {
+                break;
+            }
+        }
+        // Visibility feedback (G10 §5): this leaf contributed.
+        feedback[node] = 1u;
         if (REFRACTION && bent) {
             // Start again from the bend: a new straight ray inside the same
             // leaf (rays that leave the volume go on straight).
@@ -494,29 +548,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
             chain_start(&ray);
             probe = o / frame.domain.xyz + nudge;
             node = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+            advance = false;
             continue;
         }
-        if (last || terminated(acc)) {
-            break;
-        }
-        // Leave through the exit face and follow its neighbour pointer.
-        let next = neighbour(n, axis, d[axis] > 0.0);
-        if (next == NONE16) {
-            break;
-        }
-        t = t_exit;
-        // Probe just across the exit face, inside this leaf's face on the
-        // other axes: a point the neighbour's box is sure to contain.
-        let eps = frame.render.z;
-        let lo_u = lo / frame.domain.xyz + eps;
-        let hi_u = hi / frame.domain.xyz - eps;
-        probe = clamp((o + d * t) / frame.domain.xyz, lo_u, hi_u);
-        if (d[axis] > 0.0) {
-            probe[axis] = hi_u[axis] + 2.0 * eps;
-        } else {
-            probe[axis] = lo_u[axis] - 2.0 * eps;
-        }
-        node = descend(next, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
     }
     ray.dir = d;
     chain_end(&ray, &acc);
