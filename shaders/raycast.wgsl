@@ -115,8 +115,8 @@ fn cell_span(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>) {
     // The view by the workgroup's index (the same as gid.z, the workgroup
-    // being one view deep): a value a compiler knows to be uniform across the
-    // workgroup, so the view is read once for it, not once per invocation.
+    // being one view deep): a value a compiler can know to be uniform
+    // across the workgroup, and read the view once for all its invocations.
     let view = views[wg.z];
     // size.w = 0: every pixel; 1 + k: only quincunx sub-frame k (frame
     // reconstruction, G10 §5), one pixel of each 2×2 quad at its offset.
@@ -236,8 +236,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
     loop {
         // Through the nodes with nothing to integrate by traversal alone,
         // to the next leaf with data (or the end): a CPU device runs the
-        // leaf's whole body below for all its lanes whenever one lane needs
-        // it, so empty space must not take that path.
+        // leaf's whole body below for all its lanes on every pass of the
+        // outer loop, taken or not (docs/figures.md), so passes through
+        // empty space must not include it.
         var done = false;
         loop {
             if (advance) {
