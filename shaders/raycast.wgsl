@@ -399,7 +399,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
             if (!ISO) {
                 e = tf_end(s);
             }
-            if (skip_first) {
+            // The first sample only starts the march (the leaf's entry, or
+            // the last sample before its non-empty cells), and a segment
+            // with an end that lacks data adds nothing.
+            if (skip_first || (NO_DATA && !ISO && !(has_data(s) && has_data(s_prev)))) {
                 skip_first = false;
                 have_prev = true;
                 s_prev = s;
@@ -450,16 +453,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg
                 s_prev = s;
                 tc = tn;
                 if (tc >= t_exit || terminated(acc)) {
-                    break;
-                }
-                continue;
-            }
-            if (NO_DATA && !(has_data(s) && has_data(s_prev))) {
-                // A segment with an end that lacks data adds nothing.
-                s_prev = s;
-                e_prev = e;
-                tc = tn;
-                if (tc >= t_exit) {
                     break;
                 }
                 continue;
