@@ -26,6 +26,9 @@ use std::time::Instant;
 struct ActiveTf {
     version: u64,
     table: TfTable,
+    /// The CPU table `table` was made from (the 2D table is built from it
+    /// when first asked for).
+    preint: PreintTable,
     empty: EmptinessTable,
     /// Emptiness for refracting kernels: a range is skipped only where
     /// τ = 0 and ν = 1 (a transparent lens still bends rays).
@@ -195,6 +198,7 @@ impl Renderer {
         self.tf = Some(ActiveTf {
             version,
             table: TfTable::new(&self.gpu, &table, tf.max_importance()),
+            preint: table,
             empty,
             empty_refraction,
             function: tf.clone(),
@@ -354,7 +358,7 @@ impl Renderer {
         let start = Instant::now();
         if cfg.preintegration == Preintegration::TwoD {
             if let Some(tf) = self.tf.as_mut() {
-                tf.table.build_grid(&self.gpu);
+                tf.table.build_grid(&self.gpu, &tf.preint);
             }
         }
         let tf = self

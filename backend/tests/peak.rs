@@ -39,7 +39,15 @@ fn peak_tf() -> TransferFunction {
 
 /// The Marschner–Lobb volume under the peak's transfer function, its view
 /// and its exact integral.
-fn peak_scene() -> (Volume, TransferFunction, Placement, View, Vec<[f64; 4]>) {
+struct Peak {
+    vol: Volume,
+    tf: TransferFunction,
+    placement: Placement,
+    view: View,
+    want: Vec<[f64; 4]>,
+}
+
+fn peak_scene() -> Peak {
     let vol = marschner_lobb(32);
     let tf = peak_tf();
     let placement = Placement {
@@ -49,39 +57,55 @@ fn peak_scene() -> (Volume, TransferFunction, Placement, View, Vec<[f64; 4]>) {
     };
     let view = View::window([48, 36], [0.4, 0.3], [0.02, 0.01, 0.8]);
     let want = reference::render(&vol, &tf, &placement, &view, Tolerance { abs: 1e-7 });
-    (vol, tf, placement, view, want)
+    Peak {
+        vol,
+        tf,
+        placement,
+        view,
+        want,
+    }
+}
+
+impl Peak {
+    /// The converged image of `db` under `cfg` (checked: no NaN, nothing
+    /// negative), with its RMSE and largest error against the integral.
+    fn render(&self, db: &std::path::Path, cfg: &RenderConfig) -> (Vec<[f32; 4]>, f64, f64) {
+        let mut r = Renderer::new(db, cfg).unwrap();
+        r.set_transfer_function(1, &self.tf).unwrap();
+        let f = r.converge(&self.placement, &[self.view], cfg, 40).unwrap();
+        let image = f.images.into_iter().next().unwrap();
+        assert_valid("peak", &image);
+        let (e, mx) = error(&image, &self.want);
+        (image, e, mx)
+    }
 }
 
 #[test]
 fn one_value_peak_converges_with_the_step() {
-    let (vol, tf, placement, view, want) = peak_scene();
+    let peak = peak_scene();
     let dir = tempfile::tempdir().unwrap();
     let steps = [0.5, 0.25, 0.125, 0.0625, 0.03125];
     let mut images = Vec::new();
     for enc in [BrickEncoding::F32, BrickEncoding::U8Range] {
         let db = dir.path().join(format!("{enc:?}.pxo"));
-        import_volume(&vol, &db, 8, enc);
+        import_volume(&peak.vol, &db, 8, enc);
         let mut errors = Vec::new();
         for &s in &steps {
             let cfg = RenderConfig {
                 step_factor: s,
                 ..exact_config()
             };
-            let mut r = Renderer::new(&db, &cfg).unwrap();
-            r.set_transfer_function(1, &tf).unwrap();
-            let f = r.converge(&placement, &[view], &cfg, 40).unwrap();
-            assert_valid("peak", &f.images[0]);
-            let (e, mx) = error(&f.images[0], &want);
+            let (image, e, mx) = peak.render(&db, &cfg);
             let order = errors
                 .last()
                 .map(|&p: &f64| (p / e).log2())
                 .unwrap_or(f64::NAN);
             eprintln!(
                 "{enc:?} step {s}: RMSE {e:.3e} max {mx:.3e} order {order:.2} mean alpha {:.3}",
-                mean_alpha(&f.images[0])
+                mean_alpha(&image)
             );
             errors.push(e);
-            images.push(f.images.into_iter().next().unwrap());
+            images.push(image);
         }
         // Falls at every halving, at better than order 1.5 at the small
         // steps, below 1e-3 at 1/32 (it stopped at 5.6e-2 before).
@@ -118,10 +142,10 @@ fn one_value_peak_converges_with_the_step() {
 /// bounded; no NaN, no negative value. This is why "exact" is the default.
 #[test]
 fn the_two_d_table_on_the_peak_has_a_floor() {
-    let (vol, tf, placement, view, want) = peak_scene();
+    let peak = peak_scene();
     let dir = tempfile::tempdir().unwrap();
     let db = dir.path().join("v.pxo");
-    import_volume(&vol, &db, 8, BrickEncoding::F32);
+    import_volume(&peak.vol, &db, 8, BrickEncoding::F32);
     let mut by = Vec::new();
     for pre in [Preintegration::Exact, Preintegration::TwoD] {
         let mut errors = Vec::new();
@@ -131,11 +155,7 @@ fn the_two_d_table_on_the_peak_has_a_floor() {
                 preintegration: pre,
                 ..exact_config()
             };
-            let mut r = Renderer::new(&db, &cfg).unwrap();
-            r.set_transfer_function(1, &tf).unwrap();
-            let f = r.converge(&placement, &[view], &cfg, 40).unwrap();
-            assert_valid("peak, 2D table", &f.images[0]);
-            let (e, mx) = error(&f.images[0], &want);
+            let (_, e, mx) = peak.render(&db, &cfg);
             eprintln!("{pre:?} step {s}: RMSE {e:.3e} max {mx:.3e}");
             errors.push(e);
         }

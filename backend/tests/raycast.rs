@@ -128,7 +128,7 @@ fn measure(
     let mut gtf = TfTable::new(gpu, &table, f.max_importance());
     gtf.allow_end_path(path == Path::End);
     if path == Path::Grid {
-        gtf.build_grid(gpu);
+        gtf.build_grid(gpu, &table);
     }
     let index = SpatialIndex::build(s.db.layout(), cut, range).unwrap();
     let sc = scene(&s.db);

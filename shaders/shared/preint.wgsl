@@ -18,13 +18,27 @@ fn tf_offset(k: u32) -> u32 {
 // in a bin without a control point inside, the transfer function exactly):
 // f at the centre plus f''·w²/24, exact, no division.
 fn bin_average(base: u32, j: u32, ta: f32, tb: f32) -> vec4<f32> {
-    let a = table[base + j];
-    let b = table[base + j + 1u];
-    let m = table[base + frame.tf_mids.x + j];
+    return quadratic_average(table[base + j], table[base + frame.tf_mids.x + j],
+                             table[base + j + 1u], ta, tb);
+}
+
+// The same for the quadratic through a (0), m (½), b (1) given by value;
+// ta and tb in either order.
+fn quadratic_average(a: vec4<f32>, m: vec4<f32>, b: vec4<f32>, ta: f32, tb: f32) -> vec4<f32> {
     let t = 0.5 * (ta + tb);
     let w = tb - ta;
     let f = a * ((1.0 - t) * (1.0 - 2.0 * t)) + m * (4.0 * t * (1.0 - t)) + b * (t * (2.0 * t - 1.0));
     return max(f + (a + b - 2.0 * m) * (w * w / 6.0), vec4<f32>(0.0));
+}
+
+// ∫₀ˣ of the quadratic through a (0), m (½), b (1); with a and b swapped
+// and 1 − x, the integral over [x, 1] (each without cancellation near its
+// zero).
+fn quadratic_integral(a: vec4<f32>, m: vec4<f32>, b: vec4<f32>, x: f32) -> vec4<f32> {
+    let x2 = x * x;
+    let x3 = x2 * x;
+    return a * (x - 1.5 * x2 + (2.0 / 3.0) * x3) + m * (2.0 * x2 - (4.0 / 3.0) * x3)
+        + b * ((2.0 / 3.0) * x3 - 0.5 * x2);
 }
 
 fn segment_average(base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
@@ -125,17 +139,8 @@ fn tf_end(s: f32) -> TfEnd {
     let p = frame.counts.w + 2u * e.j;
     e.hi = table[p];
     e.lo = table[p + 1u];
-    // ∫₀ˣ of the quadratic through a (0), m (½), b (1), and ∫ₓ¹ by the same
-    // polynomial in y = 1 − x (both without cancellation near their zero).
-    let x2 = x * x;
-    let x3 = x2 * x;
-    e.below = e.a * (x - 1.5 * x2 + (2.0 / 3.0) * x3) + e.m * (2.0 * x2 - (4.0 / 3.0) * x3)
-        + e.b * ((2.0 / 3.0) * x3 - 0.5 * x2);
-    let y = 1.0 - x;
-    let y2 = y * y;
-    let y3 = y2 * y;
-    e.above = e.b * (y - 1.5 * y2 + (2.0 / 3.0) * y3) + e.m * (2.0 * y2 - (4.0 / 3.0) * y3)
-        + e.a * ((2.0 / 3.0) * y3 - 0.5 * y2);
+    e.below = quadratic_integral(e.a, e.m, e.b, x);
+    e.above = quadratic_integral(e.b, e.m, e.a, 1.0 - x);
     return e;
 }
 
@@ -149,15 +154,8 @@ fn tf_end(s: f32) -> TfEnd {
 // table's largest bin, which the range check on the CPU bounds).
 fn end_average(e0: TfEnd, e1: TfEnd) -> vec4<f32> {
     if (e0.j == e1.j) {
-        let x0 = e0.u - f32(e1.j);
-        let x1 = e1.u - f32(e1.j);
-        let t = 0.5 * (x0 + x1);
-        let w = x1 - x0;
-        let a = e1.a;
-        let b = e1.b;
-        let m = e1.m;
-        let f = a * ((1.0 - t) * (1.0 - 2.0 * t)) + m * (4.0 * t * (1.0 - t)) + b * (t * (2.0 * t - 1.0));
-        return max(f + (a + b - 2.0 * m) * (w * w / 6.0), vec4<f32>(0.0));
+        let j = f32(e1.j);
+        return quadratic_average(e1.a, e1.m, e1.b, e0.u - j, e1.u - j);
     }
     let up = e1.u > e0.u;
     var sum: vec4<f32>;

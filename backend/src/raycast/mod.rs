@@ -46,8 +46,6 @@ pub struct TfTable {
     /// other in every DVR channel.
     end_path: bool,
     end_allowed: bool,
-    /// The CPU table, kept to build the 2D table from on demand.
-    source: PreintTable,
     /// The 2D table (`preintegration = "2d"`), made when first asked for,
     /// and its nodes per axis.
     grid: Option<(wgpu::Texture, wgpu::TextureView, u32)>,
@@ -159,7 +157,6 @@ impl TfTable {
             prefix_offset,
             end_path: end_allowed,
             end_allowed,
-            source: table.clone(),
             grid: None,
             aux_base,
             aux_prefix,
@@ -221,14 +218,15 @@ impl TfTable {
         self.end_path
     }
 
-    /// Makes the 2D pre-integration table (PreintTable::grid) on the GPU,
-    /// once; `preintegration = "2d"` samples it bilinearly.
-    pub fn build_grid(&mut self, gpu: &Gpu) {
+    /// Makes the 2D pre-integration table (PreintTable::grid) of `table`,
+    /// the table this was made from, on the GPU, once; `preintegration =
+    /// "2d"` samples it bilinearly.
+    pub fn build_grid(&mut self, gpu: &Gpu, table: &PreintTable) {
         if self.grid.is_some() {
             return;
         }
-        let n = self.source.grid_nodes() as u32;
-        let data = self.source.grid();
+        let n = table.grid_nodes() as u32;
+        let data = table.grid();
         let texture = gpu.device.create_texture_with_data(
             &gpu.queue,
             &grid_descriptor("2D pre-integration table", n),
