@@ -1,7 +1,8 @@
 // Stackless octree ray casting (G08 §5, G10 §5 "Stackless octree raycaster")
 // with pre-integrated emission–absorption (G10 §4 Eq. 2) over the brick pool.
 //
-// One invocation per pixel; gid.z is the view. The ray of a pixel comes from
+// One invocation per pixel, one workgroup per listed 8×8 tile of a view
+// (only tiles whose rays can meet data are listed). The ray of a pixel comes from
 // G10 Eq. 1 (DESIGN.md "Which ray a pixel gets"), is moved to volume space
 // (data length units) and clipped to the volume's box. Traversal descends
 // from the root to the leaf that contains the current point, marches through
@@ -113,18 +114,26 @@ fn cell_span(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, 
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>) {
-    // The view by the workgroup's index (the same as gid.z, the workgroup
-    // being one view deep): a value a compiler can know to be uniform
-    // across the workgroup, and read the view once for all its invocations.
-    let view = views[wg.z];
+fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>,
+        @builtin(num_workgroups) groups: vec3<u32>) {
+    // One workgroup per listed 8×8 tile (`tiles`: the tiles whose rays can
+    // meet data, backend/src/raycast/tiles.rs): its view and place, read
+    // at the workgroup's index, a value a compiler can know to be uniform
+    // across the workgroup.
+    let w = wg.x + wg.y * groups.x;
+    if (w >= frame.dispatch.x) {
+        return;
+    }
+    let tile = tiles[w];
+    let view = views[tile.x];
+    let gid = vec2<u32>(tile.y & 0xFFFFu, tile.y >> 16u) * 8u + lid.xy;
     // size.w = 0: every pixel; 1 + k: only quincunx sub-frame k (frame
     // reconstruction, G10 §5), one pixel of each 2×2 quad at its offset.
-    var px = gid.xy;
+    var px = gid;
     if (view.size.w != 0u) {
         let k = view.size.w - 1u;
         let off = vec2<u32>(select(0u, 1u, k == 1u || k == 2u), select(0u, 1u, k == 1u || k == 3u));
-        px = gid.xy * 2u + off;
+        px = gid * 2u + off;
     }
     if (px.x >= view.size.x || px.y >= view.size.y) {
         return;

@@ -69,6 +69,9 @@ pub struct Renderer {
     cells_stale: bool,
     /// Count the samples each frame takes (`FrameStats::samples`).
     pub count_samples: bool,
+    /// Run only the tiles whose rays can meet data (on unless a test
+    /// compares against every tile).
+    pub tile_culling: bool,
 }
 
 /// A rendered frame: one premultiplied RGBA image per view, and its figures.
@@ -168,6 +171,7 @@ impl Renderer {
             pick_volume: None,
             cells_stale: false,
             count_samples: false,
+            tile_culling: true,
         })
     }
 
@@ -324,6 +328,7 @@ impl Renderer {
             tools,
             macrocells: cfg.macrocells,
             count_samples: self.count_samples,
+            tile_culling: self.tile_culling,
             adaptive_step: cfg.adaptive_step,
             multilevel: cfg.multilevel.then(|| Multilevel {
                 accuracy: cfg.accuracy as f32,
@@ -513,6 +518,7 @@ impl Renderer {
         )?;
         stats.render_ms = ms(t);
         stats.samples = out.samples;
+        stats.tiles = out.tiles;
 
         // Visible nodes of this frame's feedback, pulled up to inner nodes
         // by the loader at the next refinement (G10 §5).

@@ -4,33 +4,15 @@
 //! must fall; each test prints by how much.
 
 mod support;
-use parallax_backend::data::{self, write_synth, SynthKind};
+use parallax_backend::data::{write_synth, SynthKind};
 use parallax_backend::render::Renderer;
-use parallax_backend::store::{self, BrickEncoding, ImportOptions};
+use parallax_backend::store::BrickEncoding;
 use parallax_backend::volume::VoxelType;
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Interpolation, RenderConfig, Shading};
 use parallax_common::tf::TransferFunction;
 use std::path::Path;
-
-const COLIN27: &str = "/usr/share/mricron/templates/ch2.nii.gz";
-
-fn configs() -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
-}
-
-fn import(src: &Path, db: &Path, encoding: BrickEncoding) {
-    store::import(
-        data::open(src, None).unwrap().as_mut(),
-        db,
-        "test volume",
-        &ImportOptions {
-            encoding,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-}
+use support::{colin27, colin_placement, configs, import_file};
 
 /// Renders the converged frame with and without macrocells; asserts the
 /// images are equal bit for bit; returns the samples of each.
@@ -75,23 +57,12 @@ fn compare(
     (s_on, s_off)
 }
 
-fn colin_placement() -> Placement {
-    Placement {
-        center: [0.0, 0.0, 0.0],
-        rotation_deg: [-90.0, 180.0, 0.0],
-        size: 0.25,
-    }
-}
-
 #[test]
 fn colin27_skin_and_brain_unchanged_with_fewer_samples() {
-    if !Path::new(COLIN27).exists() {
-        eprintln!("SKIPPED: {COLIN27} is not installed (apt: mricron-data)");
-        return;
-    }
     let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("colin.pxo");
-    import(Path::new(COLIN27), &db, BrickEncoding::U8Range);
+    let Some(db) = colin27(dir.path(), BrickEncoding::U8Range) else {
+        return;
+    };
     let phong = RenderConfig {
         shading: Shading::Phong,
         ..RenderConfig::default()
@@ -135,7 +106,7 @@ fn a_ct_with_much_air_unchanged_with_fewer_samples() {
         (BrickEncoding::F32, Interpolation::Exact),
     ] {
         let db = dir.path().join(format!("ct-{encoding:?}.pxo"));
-        import(&src, &db, encoding);
+        import_file(&src, &db, encoding);
         let cfg = RenderConfig {
             interpolation,
             early_termination: 1.0,

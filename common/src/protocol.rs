@@ -127,6 +127,10 @@ pub struct FrameStats {
     /// benches and tests; else 0).
     #[serde(default)]
     pub samples: u64,
+    /// 8×8 pixel tiles the ray-casting dispatch ran: those whose rays can
+    /// meet data (the rest of the views' tiles are left out).
+    #[serde(default)]
+    pub tiles: u64,
     /// Resident memory of this back end's process after the frame (bytes;
     /// in the embedded mode the whole process).
     #[serde(default)]

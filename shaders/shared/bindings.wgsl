@@ -45,6 +45,7 @@ struct GpuFrame {
     tf_mids: vec4<u32>,   // offset of the bin midpoint values in a table part, 0, 0, 0
     lod: vec4<f32>,       // multilevel sampling: accuracy (pixels per voxel), light field s0 (m), tan(Φ/2), light field (1) or not (0)
     splits: vec4<u32>,    // per axis, the levels that halve it (bit l: level l against l − 1), 0
+    dispatch: vec4<u32>,  // tiles listed in `tiles` for this dispatch, 0, 0, 0
 }
 
 // A tool's constant parameters (their meaning is the enhancer's: see
@@ -84,6 +85,9 @@ struct Slot {
 // otherwise) and its bilinear sampler.
 @group(0) @binding(12) var preint_grid: texture_2d<f32>;
 @group(0) @binding(13) var grid_sampler: sampler;
+// The 8×8 tiles the dispatch runs, one per workgroup: (view, tile x | tile
+// y << 16) (backend/src/raycast/tiles.rs).
+@group(0) @binding(14) var<storage, read> tiles: array<vec2<u32>>;
 
 // The octree's levels (backend/src/store/layout.rs): level l halves axis a
 // against level l − 1 where bit l of frame.splits[a] is set (all three in

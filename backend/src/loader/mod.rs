@@ -26,7 +26,7 @@
 
 mod cache;
 mod feedback;
-mod geometry;
+pub(crate) mod geometry;
 mod io;
 mod ranges;
 

@@ -5,6 +5,7 @@
 pub mod params;
 pub mod pool;
 pub mod shader;
+pub mod tiles;
 
 use crate::gpu::Gpu;
 use crate::index::SpatialIndex;
@@ -288,6 +289,9 @@ pub struct RenderSettings {
     /// Segment optics from the 2D pre-integration table, bilinearly (the
     /// table must have been made: [`TfTable::build_grid`]).
     pub preint_2d: bool,
+    /// Run only the 8×8 tiles whose rays can meet data (`tiles`); off,
+    /// every tile of every view.
+    pub tile_culling: bool,
 }
 
 /// What multilevel sampling needs to know of refinement: the same footprint
@@ -320,6 +324,7 @@ impl Default for RenderSettings {
             multilevel: None,
             tricubic: false,
             preint_2d: false,
+            tile_culling: true,
         }
     }
 }
@@ -351,6 +356,8 @@ pub struct Rendered {
     pub prediction_reset: bool,
     /// Samples taken (0 unless counted).
     pub samples: u64,
+    /// Tiles the dispatch ran.
+    pub tiles: u64,
 }
 
 pub struct Raycaster {
@@ -437,6 +444,8 @@ struct FrameBuffers {
     /// mean nothing after it is made or grown.
     prediction: Grown,
     prediction_fresh: bool,
+    /// The tiles the dispatch runs (`tiles::tiles`).
+    tiles: Grown,
     /// Samples taken this frame, a 64-bit count in two words (counted only
     /// when asked for).
     counters: wgpu::Buffer,
@@ -458,7 +467,9 @@ const STORAGE_IN: wgpu::BufferUsages =
 const FEEDBACK: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_SRC)
     .union(wgpu::BufferUsages::COPY_DST);
-const IMAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC);
+const IMAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
+    .union(wgpu::BufferUsages::COPY_SRC)
+    .union(wgpu::BufferUsages::COPY_DST);
 const PREDICTION: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE;
 /// Bytes of the sample counters.
 const COUNTERS: u64 = 16;
@@ -481,6 +492,7 @@ impl FrameBuffers {
             readback: Grown::new(gpu, "readback", READBACK, 0),
             prediction: Grown::new(gpu, "prediction buffer", PREDICTION, 0),
             prediction_fresh: true,
+            tiles: Grown::new(gpu, "tiles", STORAGE_IN, 0),
             counters: gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("sample counters"),
                 size: COUNTERS,
@@ -489,7 +501,7 @@ impl FrameBuffers {
             }),
             bind: None,
             made: FrameBufferCounts {
-                buffers: 8,
+                buffers: 9,
                 bind_groups: 0,
             },
         }
@@ -497,8 +509,9 @@ impl FrameBuffers {
 
     /// Grows what this frame needs; drops the bind group if anything it
     /// names changed.
-    fn fit(&mut self, gpu: &Gpu, views: u64, index: u64, image: u64) {
+    fn fit(&mut self, gpu: &Gpu, views: u64, index: u64, image: u64, tiles: u64) {
         let grown = [
+            self.tiles.fit(gpu, "tiles", STORAGE_IN, tiles),
             self.views.fit(gpu, "views", STORAGE_IN, views),
             self.index.fit(gpu, "spatial index", STORAGE_IN, index),
             self.feedback
@@ -507,7 +520,7 @@ impl FrameBuffers {
             self.prediction
                 .fit(gpu, "prediction buffer", PREDICTION, image / 4),
         ];
-        self.prediction_fresh |= grown[4];
+        self.prediction_fresh |= grown[5];
         let readback = self
             .readback
             .fit(gpu, "readback", READBACK, image + index / 6 + COUNTERS);
@@ -637,6 +650,7 @@ impl Raycaster {
                     storage(11, false),
                     texture(12, wgpu::TextureViewDimension::D2, grid_filterable),
                     sampler(13, grid_filterable),
+                    storage(14, true),
                 ],
             });
         let grid_sampler = make_sampler(gpu, "2D pre-integration table", grid_filterable);
@@ -799,6 +813,7 @@ impl Raycaster {
                 seconds: 0.0,
                 prediction_reset: false,
                 samples: 0,
+                tiles: 0,
             });
         }
         let mut frame = self.frame_uniform(pool, tf, scene, settings);
@@ -808,8 +823,27 @@ impl Raycaster {
         if img_size > dev.limits().max_storage_buffer_binding_size {
             bail!("render: {pixels} pixels in one frame exceed the GPU's storage binding limit");
         }
+        let k = &settings.kernel;
+        let plain = !k.mimda
+            && !k.refraction
+            && !k.iso
+            && k.enhancers.iter().all(|&e| e == EnhancerKind::PassThrough);
+        // A plain kernel adds nothing where a ray meets no leaf with data;
+        // the others (enhancers that draw on every ray, refraction) need
+        // every ray through the volume's box.
+        let macrocells = settings.macrocells && plain && pool.cells.per_axis > 0;
+        let cull = match (plain, macrocells) {
+            _ if !settings.tile_culling => tiles::Cull::Off,
+            (false, _) => tiles::Cull::Volume,
+            (true, false) => tiles::Cull::Leaves,
+            (true, true) => tiles::Cull::Cells(&pool.cells),
+        };
+        let tiles = tiles::tiles(views, scene, index, cull, settings.subframe.is_some());
+        frame.dispatch[0] = tiles.len() as u32;
         let views_bytes = (gviews.len() * std::mem::size_of::<GpuView>()) as u64;
-        self.frame.fit(gpu, views_bytes, fb_size * 6, img_size);
+        let tiles_bytes = std::mem::size_of_val(tiles.as_slice()) as u64;
+        self.frame
+            .fit(gpu, views_bytes, fb_size * 6, img_size, tiles_bytes);
         // A prediction buffer just made holds nothing: traverse fully.
         let mut prediction_reset = false;
         if frame.predict[0] > 0.0 && self.frame.prediction_fresh {
@@ -824,6 +858,10 @@ impl Raycaster {
             .write_buffer(&fr.views.buffer, 0, bytemuck::cast_slice(&gviews));
         gpu.queue
             .write_buffer(&fr.index.buffer, 0, bytemuck::cast_slice(&index.nodes));
+        if !tiles.is_empty() {
+            gpu.queue
+                .write_buffer(&fr.tiles.buffer, 0, bytemuck::cast_slice(&tiles));
+        }
         if !matches!(&fr.bind, Some((_, t, p)) if *t == tf.id && *p == pool.id) {
             let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("raycast"),
@@ -887,6 +925,10 @@ impl Raycaster {
                         binding: 13,
                         resource: wgpu::BindingResource::Sampler(&self.grid_sampler),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 14,
+                        resource: fr.tiles.buffer.as_entire_binding(),
+                    },
                 ],
             });
             self.frame.bind = Some((bind, tf.id, pool.id));
@@ -894,14 +936,6 @@ impl Raycaster {
         }
         gpu.queue
             .write_buffer(&self.tools, 0, bytemuck::cast_slice(&settings.tools));
-        let max_w = views.iter().map(|v| v.resolution[0]).max().unwrap_or(0);
-        let max_h = views.iter().map(|v| v.resolution[1]).max().unwrap_or(0);
-        let k = &settings.kernel;
-        let plain = !k.mimda
-            && !k.refraction
-            && !k.iso
-            && k.enhancers.iter().all(|&e| e == EnhancerKind::PassThrough);
-        let macrocells = settings.macrocells && plain && pool.cells.per_axis > 0;
         let grid = settings.preint_2d && self.grid_filterable && !k.iso && tf.grid.is_some();
         let pipeline = self
             .pipeline(
@@ -927,16 +961,18 @@ impl Raycaster {
         if settings.count_samples {
             enc.clear_buffer(&fr.counters, 0, None);
         }
-        {
+        // Pixels of the tiles left out stay zero.
+        enc.clear_buffer(&fr.image.buffer, 0, Some(img_size));
+        if !tiles.is_empty() {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, bind, &[]);
-            // A sub-frame has one pixel of every 2×2 quad.
-            let (gw, gh) = match settings.subframe {
-                Some(_) => (max_w.div_ceil(2), max_h.div_ceil(2)),
-                None => (max_w, max_h),
-            };
-            pass.dispatch_workgroups(gw.div_ceil(8), gh.div_ceil(8), views.len() as u32);
+            let n = tiles.len() as u32;
+            pass.dispatch_workgroups(
+                n.min(tiles::TILES_PER_ROW),
+                n.div_ceil(tiles::TILES_PER_ROW),
+                1,
+            );
         }
         enc.copy_buffer_to_buffer(&fr.image.buffer, 0, &fr.readback.buffer, 0, img_size);
         enc.copy_buffer_to_buffer(
@@ -990,6 +1026,7 @@ impl Raycaster {
                 seconds: start.elapsed().as_secs_f64(),
                 prediction_reset,
                 samples,
+                tiles: tiles.len() as u64,
             })
         }
     }
@@ -1075,6 +1112,7 @@ impl Raycaster {
                 }
             },
             splits: [l.splits[0], l.splits[1], l.splits[2], 0],
+            dispatch: [0; 4],
         }
     }
 }

@@ -59,6 +59,8 @@ pub struct GpuFrame {
     /// The octree's split masks per axis (`OctreeLayout::splits`: bit l set
     /// where level l halves the axis), 0.
     pub splits: [u32; 4],
+    /// Tiles listed for this dispatch (`tiles`), 0, 0, 0.
+    pub dispatch: [u32; 4],
 }
 
 /// WGSL `ToolParams`: one tool's constant parameters (meaning per enhancer,

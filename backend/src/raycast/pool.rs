@@ -46,6 +46,13 @@ pub struct Macrocells {
 }
 
 impl Macrocells {
+    /// Whether cell `k` (x + C·(y + C·z)) of `slot` is empty under the
+    /// transfer function it was last marked with.
+    pub fn is_empty(&self, slot: u32, k: usize) -> bool {
+        let w = self.bits[slot as usize * CELL_WORDS as usize + k / 32];
+        (w >> (k % 32)) & 1 == 1
+    }
+
     /// The cell size for bricks of side `b`: 4 voxels, doubled until at
     /// most 8 cells per axis; none when it does not divide `b`.
     pub fn layout(b: u32) -> (u32, u32) {

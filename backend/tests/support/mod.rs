@@ -86,3 +86,46 @@ pub fn exact_config() -> RenderConfig {
         ..RenderConfig::default()
     }
 }
+
+/// The Colin27 head MRI of Debian's mricron-data.
+pub const COLIN27: &str = "/usr/share/mricron/templates/ch2.nii.gz";
+
+/// The repository's configs/ folder.
+pub fn configs() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
+}
+
+/// Imports the file `src` into the database `db`.
+pub fn import_file(src: &Path, db: &Path, encoding: BrickEncoding) {
+    store::import(
+        parallax_backend::data::open(src, None).unwrap().as_mut(),
+        db,
+        "test volume",
+        &ImportOptions {
+            encoding,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+}
+
+/// Colin27 imported into `dir`, or `None` (said on stderr) where the file
+/// is not installed.
+pub fn colin27(dir: &Path, encoding: BrickEncoding) -> Option<std::path::PathBuf> {
+    if !Path::new(COLIN27).exists() {
+        eprintln!("SKIPPED: {COLIN27} is not installed (apt: mricron-data)");
+        return None;
+    }
+    let db = dir.join("colin.pxo");
+    import_file(Path::new(COLIN27), &db, encoding);
+    Some(db)
+}
+
+/// The head upright, face to the viewer, 25 cm tall.
+pub fn colin_placement() -> parallax_common::camera::Placement {
+    parallax_common::camera::Placement {
+        center: [0.0, 0.0, 0.0],
+        rotation_deg: [-90.0, 180.0, 0.0],
+        size: 0.25,
+    }
+}
