@@ -124,6 +124,9 @@ pub fn tiles(
         let [w, h] = v.resolution;
         let tw = w.div_ceil(px_per_tile);
         let th = h.div_ceil(px_per_tile);
+        if tw == 0 || th == 0 {
+            continue;
+        }
         let mut mark = vec![matches!(cull, Cull::Off); (tw * th) as usize];
         for corners in &boxes {
             let Some([c0, c1, r0, r1]) = pixel_bounds(v, corners) else {
