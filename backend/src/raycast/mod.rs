@@ -511,7 +511,6 @@ impl FrameBuffers {
     /// names changed.
     fn fit(&mut self, gpu: &Gpu, views: u64, index: u64, image: u64, tiles: u64) {
         let grown = [
-            self.tiles.fit(gpu, "tiles", STORAGE_IN, tiles),
             self.views.fit(gpu, "views", STORAGE_IN, views),
             self.index.fit(gpu, "spatial index", STORAGE_IN, index),
             self.feedback
@@ -519,8 +518,9 @@ impl FrameBuffers {
             self.image.fit(gpu, "image", IMAGE, image),
             self.prediction
                 .fit(gpu, "prediction buffer", PREDICTION, image / 4),
+            self.tiles.fit(gpu, "tiles", STORAGE_IN, tiles),
         ];
-        self.prediction_fresh |= grown[5];
+        self.prediction_fresh |= grown[4];
         let readback = self
             .readback
             .fit(gpu, "readback", READBACK, image + index / 6 + COUNTERS);
@@ -828,10 +828,10 @@ impl Raycaster {
             && !k.refraction
             && !k.iso
             && k.enhancers.iter().all(|&e| e == EnhancerKind::PassThrough);
+        let macrocells = settings.macrocells && plain && pool.cells.per_axis > 0;
         // A plain kernel adds nothing where a ray meets no leaf with data;
         // the others (enhancers that draw on every ray, refraction) need
         // every ray through the volume's box.
-        let macrocells = settings.macrocells && plain && pool.cells.per_axis > 0;
         let cull = match (plain, macrocells) {
             _ if !settings.tile_culling => tiles::Cull::Off,
             (false, _) => tiles::Cull::Volume,

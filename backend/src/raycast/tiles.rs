@@ -81,14 +81,15 @@ pub fn tiles(
             pl.to_display(ext, p)
         }));
     };
-    for (n, k) in index.nodes.iter().zip(&index.keys) {
-        if matches!(cull, Cull::Off) {
-            break;
-        }
-        if matches!(cull, Cull::Volume) {
+    let leaves = match cull {
+        Cull::Off => &[][..],
+        Cull::Volume => {
             add(DVec3::ZERO, DVec3::from(ext));
-            break;
+            &[][..]
         }
+        Cull::Leaves | Cull::Cells(_) => &index.nodes[..],
+    };
+    for (n, k) in leaves.iter().zip(&index.keys) {
         let Some(slot) = n.slot().filter(|_| n.first_child().is_none()) else {
             continue;
         };
