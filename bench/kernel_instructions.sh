@@ -20,7 +20,7 @@ command -v valgrind >/dev/null || {
   apt-get update -qq
   DEBIAN_FRONTEND=noninteractive apt-get install -y -qq valgrind >/dev/null
 }
-px=target/release/parallax
+px=${PX:-target/release/parallax}
 [ -x "$px" ] || cargo build --release --locked 2>&1 | tail -n 3
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT

@@ -34,7 +34,11 @@ with none.
 Parallax is also run with the 2D pre-integration table (render.preintegration
 = "2d": one bilinear texture fetch a segment instead of the exact table's
 five reads, which dominate a sample's cost on lavapipe) on a finer ladder of
-steps (TABLE_STEPS), early termination matched.
+steps (TABLE_STEPS), early termination matched; and the same from a database
+imported with bricks of 64 voxels instead of 32 (`parallax import --brick
+64`: half as many leaves along a ray, so less traversal per ray; the finest
+level is the same data) on the coarser steps (BIG_BRICK_STEPS), where that
+cost weighs most.
 
 Timing: Parallax's render_ms (median of the last 8 of 16 --sync frames)
 against the wall time of renWin.Render() (median of 5 after a warm-up).
@@ -82,6 +86,7 @@ EXTRA_STEPS = [2.0, 4.0]          # coarser, to find equal-error pairs
 # one bilinear fetch a segment), early termination matched, on a finer
 # ladder of steps so that each VTK setting finds its equal-error partner.
 TABLE_STEPS = [0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]
+BIG_BRICK_STEPS = [1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0]
 STAGES = ["refine_ms", "upload_ms", "index_ms", "render_ms", "output_ms", "total_ms"]
 
 
@@ -689,7 +694,9 @@ def parallax_row(case, config, step, et, st, rmse, mx, psnr):
 def run_case(case, a, px, out, volume):
     name = case["name"]
     stem = "colin27" if case["volume"] == "colin27" else "ct256"
-    dbs = {"full": (out / f"{stem}-full.pxo").resolve(), "8-bit": (out / f"{stem}-8bit.pxo").resolve()}
+    dbs = {"full": (out / f"{stem}-full.pxo").resolve(), "8-bit": (out / f"{stem}-8bit.pxo").resolve(),
+           "full-b64": (out / f"{stem}-full-b64.pxo").resolve(),
+           "8-bit-b64": (out / f"{stem}-8bit-b64.pxo").resolve()}
     for k, p in dbs.items():
         if not p.exists():
             sys.exit(f"{p} missing: run bench/vtk_compare.sh (it imports the databases)")
@@ -736,6 +743,14 @@ def run_case(case, a, px, out, volume):
                                     preintegration="2d"), out, a.frames, a.reuse)
         rmse, mx, psnr = image_error(img, ref)
         rows.append(parallax_row(name, f"{bricks} bricks, 2D table", s, VTK_EARLY_TERMINATION, st,
+                                 rmse, mx, psnr))
+    for s in BIG_BRICK_STEPS:
+        run = f"{name}-ours-{bricks}-b64-2d-step{s}-etvtk"
+        img, st = run_parallax(px, run, base, dbs[f"{bricks}-b64"],
+                               dict(step_factor=s, early_termination=VTK_EARLY_TERMINATION,
+                                    preintegration="2d"), out, a.frames, a.reuse)
+        rmse, mx, psnr = image_error(img, ref)
+        rows.append(parallax_row(name, f"{bricks} bricks of 64, 2D table", s, VTK_EARLY_TERMINATION, st,
                                  rmse, mx, psnr))
 
     # ---- VTK, on Parallax's domain (padded + cropped) and as it comes.

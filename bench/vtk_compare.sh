@@ -21,10 +21,15 @@ mkdir -p "$out"
 # Imported every run, so that the databases are in this build's format.
 $px import "$src" -o "$out/colin27-full.pxo" --quantize none
 $px import "$src" -o "$out/colin27-8bit.pxo" --quantize u8
+# The same with bricks of 64 (fewer leaves along a ray).
+$px import "$src" -o "$out/colin27-full-b64.pxo" --quantize none --brick 64
+$px import "$src" -o "$out/colin27-8bit-b64.pxo" --quantize u8 --brick 64
 # The CT: a 256³ head phantom in Hounsfield units, mostly air.
 [ -f "$out/ct256.nrrd" ] || $px synth ct --size 256 --type i16 -o "$out/ct256.nrrd"
 $px import "$out/ct256.nrrd" -o "$out/ct256-full.pxo" --quantize none
 $px import "$out/ct256.nrrd" -o "$out/ct256-8bit.pxo" --quantize u8
+$px import "$out/ct256.nrrd" -o "$out/ct256-full-b64.pxo" --quantize none --brick 64
+$px import "$out/ct256.nrrd" -o "$out/ct256-8bit-b64.pxo" --quantize u8 --brick 64
 
 # VTK renders off screen through EGL (or OSMesa) on recent PyPI wheels; fall
 # back to a virtual X display only if that fails.

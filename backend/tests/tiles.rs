@@ -194,3 +194,36 @@ fn a_ct_with_much_air_runs_a_fraction_of_its_tiles() {
     });
     assert!(f < 0.8, "{f:.2} of the tiles run");
 }
+
+/// With multilevel sampling a leaf's samples blend in its parent and
+/// grandparent, whose data reach where the leaf's own cells are empty:
+/// tiles are culled by the leaves with data, and the image is still the
+/// one with every tile run.
+#[test]
+fn multilevel_sampling_is_culled_by_leaves() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("ct.nrrd");
+    write_synth(SynthKind::Ct, 96, VoxelType::I16, &src, |_| {}).unwrap();
+    let db = dir.path().join("ct.pxo");
+    import_file(&src, &db, BrickEncoding::U8Range);
+    let tf = TransferFunction::load(configs().join("tf/ct-bone.toml")).unwrap();
+    let cfg = RenderConfig {
+        multilevel: true,
+        accuracy: 2.0,
+        ..RenderConfig::default()
+    };
+    let f = compare(&Case {
+        what: "CT phantom, bone, multilevel",
+        db: &db,
+        tf: &tf,
+        tools: &[],
+        placement: Placement {
+            center: [0.0; 3],
+            rotation_deg: [-70.0, 30.0, 0.0],
+            size: 0.25,
+        },
+        views: &[View::window([160, 120], [0.4, 0.3], [0.0, 0.0, 0.8])],
+        cfg,
+    });
+    assert!(f < 1.0, "{f:.2} of the tiles run");
+}

@@ -832,7 +832,11 @@ impl Raycaster {
         // A plain kernel adds nothing where a ray meets no leaf with data;
         // the others (enhancers that draw on every ray, refraction) need
         // every ray through the volume's box.
-        let cull = match (plain, macrocells) {
+        // Multilevel sampling blends a leaf's parent and grandparent into its
+        // samples, so its own empty cells do not bound what a ray meets
+        // there: leaves, not cells.
+        let multilevel = settings.multilevel.is_some() && !k.iso;
+        let cull = match (plain, macrocells && !multilevel) {
             _ if !settings.tile_culling => tiles::Cull::Off,
             (false, _) => tiles::Cull::Volume,
             (true, false) => tiles::Cull::Leaves,

@@ -53,6 +53,34 @@ impl Macrocells {
         (w >> (k % 32)) & 1 == 1
     }
 
+    /// Cells for `slots` slots of bricks of side `b`, cell k of slot s
+    /// empty where `empty(s, k)` (tests of what reads them).
+    #[cfg(test)]
+    pub(crate) fn with_empty(
+        slots: u32,
+        b: u32,
+        mut empty: impl FnMut(u32, usize) -> bool,
+    ) -> Self {
+        let (per_axis, voxels) = Self::layout(b);
+        let n = (per_axis * per_axis * per_axis) as usize;
+        let mut bits = vec![0u32; slots as usize * CELL_WORDS as usize];
+        for s in 0..slots {
+            for k in 0..n {
+                if empty(s, k) {
+                    bits[s as usize * CELL_WORDS as usize + k / 32] |= 1 << (k % 32);
+                }
+            }
+        }
+        Macrocells {
+            per_axis,
+            voxels,
+            ranges: vec![[1.0, 0.0]; slots as usize * n],
+            bits,
+            dirty: Vec::new(),
+            all_dirty: false,
+        }
+    }
+
     /// The cell size for bricks of side `b`: 4 voxels, doubled until at
     /// most 8 cells per axis; none when it does not divide `b`.
     pub fn layout(b: u32) -> (u32, u32) {
