@@ -171,49 +171,16 @@ fn colin27_views_unchanged_with_fewer_tiles() {
     }
 }
 
-#[test]
-fn a_ct_with_much_air_runs_a_fraction_of_its_tiles() {
+/// The 96³ CT phantom under the CT-Bone preset, compared as `compare` does.
+fn compare_ct(what: &str, cfg: RenderConfig) -> f64 {
     let dir = tempfile::tempdir().unwrap();
     let src = dir.path().join("ct.nrrd");
     write_synth(SynthKind::Ct, 96, VoxelType::I16, &src, |_| {}).unwrap();
     let db = dir.path().join("ct.pxo");
     import_file(&src, &db, BrickEncoding::U8Range);
     let tf = TransferFunction::load(configs().join("tf/ct-bone.toml")).unwrap();
-    let f = compare(&Case {
-        what: "CT phantom, bone",
-        db: &db,
-        tf: &tf,
-        tools: &[],
-        placement: Placement {
-            center: [0.0; 3],
-            rotation_deg: [-70.0, 30.0, 0.0],
-            size: 0.25,
-        },
-        views: &[View::window([160, 120], [0.4, 0.3], [0.0, 0.0, 0.8])],
-        cfg: RenderConfig::default(),
-    });
-    assert!(f < 0.8, "{f:.2} of the tiles run");
-}
-
-/// With multilevel sampling a leaf's samples blend in its parent and
-/// grandparent, whose data reach where the leaf's own cells are empty:
-/// tiles are culled by the leaves with data, and the image is still the
-/// one with every tile run.
-#[test]
-fn multilevel_sampling_is_culled_by_leaves() {
-    let dir = tempfile::tempdir().unwrap();
-    let src = dir.path().join("ct.nrrd");
-    write_synth(SynthKind::Ct, 96, VoxelType::I16, &src, |_| {}).unwrap();
-    let db = dir.path().join("ct.pxo");
-    import_file(&src, &db, BrickEncoding::U8Range);
-    let tf = TransferFunction::load(configs().join("tf/ct-bone.toml")).unwrap();
-    let cfg = RenderConfig {
-        multilevel: true,
-        accuracy: 2.0,
-        ..RenderConfig::default()
-    };
-    let f = compare(&Case {
-        what: "CT phantom, bone, multilevel",
+    compare(&Case {
+        what,
         db: &db,
         tf: &tf,
         tools: &[],
@@ -224,6 +191,26 @@ fn multilevel_sampling_is_culled_by_leaves() {
         },
         views: &[View::window([160, 120], [0.4, 0.3], [0.0, 0.0, 0.8])],
         cfg,
-    });
+    })
+}
+
+#[test]
+fn a_ct_with_much_air_runs_a_fraction_of_its_tiles() {
+    let f = compare_ct("CT phantom, bone", RenderConfig::default());
+    assert!(f < 0.8, "{f:.2} of the tiles run");
+}
+
+/// With multilevel sampling a leaf's samples blend in its parent and
+/// grandparent, whose data reach where the leaf's own cells are empty:
+/// tiles are culled by the leaves with data, and the image is still the
+/// one with every tile run.
+#[test]
+fn multilevel_sampling_is_culled_by_leaves() {
+    let cfg = RenderConfig {
+        multilevel: true,
+        accuracy: 2.0,
+        ..RenderConfig::default()
+    };
+    let f = compare_ct("CT phantom, bone, multilevel", cfg);
     assert!(f < 1.0, "{f:.2} of the tiles run");
 }
