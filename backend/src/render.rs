@@ -519,6 +519,7 @@ impl Renderer {
         stats.render_ms = ms(t);
         stats.samples = out.samples;
         stats.tiles = out.tiles;
+        stats.tiles_ms = out.tiles_seconds * 1e3;
 
         // Visible nodes of this frame's feedback, pulled up to inner nodes
         // by the loader at the next refinement (G10 §5).

@@ -131,6 +131,9 @@ pub struct FrameStats {
     /// meet data (the rest of the views' tiles are left out).
     #[serde(default)]
     pub tiles: u64,
+    /// Of `render_ms`, the time the CPU took to list those tiles.
+    #[serde(default)]
+    pub tiles_ms: f64,
     /// Resident memory of this back end's process after the frame (bytes;
     /// in the embedded mode the whole process).
     #[serde(default)]

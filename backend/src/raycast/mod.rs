@@ -358,6 +358,8 @@ pub struct Rendered {
     pub samples: u64,
     /// Tiles the dispatch ran.
     pub tiles: u64,
+    /// Seconds the CPU took to list them.
+    pub tiles_seconds: f64,
 }
 
 pub struct Raycaster {
@@ -814,6 +816,7 @@ impl Raycaster {
                 prediction_reset: false,
                 samples: 0,
                 tiles: 0,
+                tiles_seconds: 0.0,
             });
         }
         let mut frame = self.frame_uniform(pool, tf, scene, settings);
@@ -842,7 +845,9 @@ impl Raycaster {
             (true, false) => tiles::Cull::Leaves,
             (true, true) => tiles::Cull::Cells(&pool.cells),
         };
+        let tiles_start = std::time::Instant::now();
         let tiles = tiles::tiles(views, scene, index, cull, settings.subframe.is_some());
+        let tiles_seconds = tiles_start.elapsed().as_secs_f64();
         frame.dispatch[0] = tiles.len() as u32;
         let views_bytes = (gviews.len() * std::mem::size_of::<GpuView>()) as u64;
         let tiles_bytes = std::mem::size_of_val(tiles.as_slice()) as u64;
@@ -1031,6 +1036,7 @@ impl Raycaster {
                 prediction_reset,
                 samples,
                 tiles: tiles.len() as u64,
+                tiles_seconds,
             })
         }
     }
