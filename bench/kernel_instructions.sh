@@ -5,6 +5,7 @@
 # from run to run), for A/B comparisons of kernel changes.
 #
 #   bash bench/kernel_instructions.sh SCENE [FRAMES]
+#   PX=/path/to/parallax bash bench/kernel_instructions.sh SCENE   (another build, for A/B)
 #
 # Renders SCENE for FRAMES (default 7) --sync frames under callgrind, then
 # again for one frame fewer, and prints the kernel's instructions (the JIT
