@@ -736,22 +736,16 @@ def run_case(case, a, px, out, volume):
                 rows.append(parallax_row(name, f"{bricks} bricks", s, et, st, rmse, mx, psnr))
 
     bricks = "full" if case["full"] else "8-bit"
-    for s in TABLE_STEPS:
-        run = f"{name}-ours-{bricks}-2d-step{s}-etvtk"
-        img, st = run_parallax(px, run, base, dbs[bricks],
-                               dict(step_factor=s, early_termination=VTK_EARLY_TERMINATION,
-                                    preintegration="2d"), out, a.frames, a.reuse)
-        rmse, mx, psnr = image_error(img, ref)
-        rows.append(parallax_row(name, f"{bricks} bricks, 2D table", s, VTK_EARLY_TERMINATION, st,
-                                 rmse, mx, psnr))
-    for s in BIG_BRICK_STEPS:
-        run = f"{name}-ours-{bricks}-b64-2d-step{s}-etvtk"
-        img, st = run_parallax(px, run, base, dbs[f"{bricks}-b64"],
-                               dict(step_factor=s, early_termination=VTK_EARLY_TERMINATION,
-                                    preintegration="2d"), out, a.frames, a.reuse)
-        rmse, mx, psnr = image_error(img, ref)
-        rows.append(parallax_row(name, f"{bricks} bricks of 64, 2D table", s, VTK_EARLY_TERMINATION, st,
-                                 rmse, mx, psnr))
+    for db, label, steps in [(bricks, f"{bricks} bricks", TABLE_STEPS),
+                             (f"{bricks}-b64", f"{bricks} bricks of 64", BIG_BRICK_STEPS)]:
+        for s in steps:
+            run = f"{name}-ours-{db}-2d-step{s}-etvtk"
+            img, st = run_parallax(px, run, base, dbs[db],
+                                   dict(step_factor=s, early_termination=VTK_EARLY_TERMINATION,
+                                        preintegration="2d"), out, a.frames, a.reuse)
+            rmse, mx, psnr = image_error(img, ref)
+            rows.append(parallax_row(name, f"{label}, 2D table", s, VTK_EARLY_TERMINATION, st,
+                                     rmse, mx, psnr))
 
     # ---- VTK, on Parallax's domain (padded + cropped) and as it comes.
     log("VTK vtkFixedPointVolumeRayCastMapper:")

@@ -188,33 +188,35 @@ fn tiles_in(
         let cells_of = |r: [u32; 4]| {
             (r[2]..=r[3]).flat_map(move |ty| (r[0]..=r[1]).map(move |tx| (ty * tw + tx) as usize))
         };
-        'boxes: for &(_, ci) in &order {
-            let c = &cands[ci];
-            let r = match rect(c.lo, c.hi) {
-                Err(()) => {
-                    mark.fill(true);
-                    break 'boxes;
+        // Whether some box reaches the observer's plane (or the view is
+        // degenerate): then every tile.
+        let whole = 'boxes: {
+            for &(_, ci) in &order {
+                let c = &cands[ci];
+                let r = match rect(c.lo, c.hi) {
+                    Err(()) => break 'boxes true,
+                    Ok(None) => continue,
+                    Ok(Some(r)) => r,
+                };
+                if c.rows.is_empty() {
+                    cells_of(r).for_each(|i| mark[i] = true);
+                    continue;
                 }
-                Ok(None) => continue,
-                Ok(Some(r)) => r,
-            };
-            if c.rows.is_empty() {
-                cells_of(r).for_each(|i| mark[i] = true);
-                continue;
-            }
-            if prune && cells_of(r).all(|i| mark[i]) {
-                continue;
-            }
-            for &(lo, hi) in &rows[c.rows.clone()] {
-                match rect(lo, hi) {
-                    Err(()) => {
-                        mark.fill(true);
-                        break 'boxes;
+                if prune && cells_of(r).all(|i| mark[i]) {
+                    continue;
+                }
+                for &(lo, hi) in &rows[c.rows.clone()] {
+                    match rect(lo, hi) {
+                        Err(()) => break 'boxes true,
+                        Ok(None) => {}
+                        Ok(Some(r)) => cells_of(r).for_each(|i| mark[i] = true),
                     }
-                    Ok(None) => {}
-                    Ok(Some(r)) => cells_of(r).for_each(|i| mark[i] = true),
                 }
             }
+            false
+        };
+        if whole {
+            mark.fill(true);
         }
         for ty in 0..th {
             for tx in 0..tw {
@@ -337,6 +339,17 @@ mod tests {
         tn <= tf
     }
 
+    /// A projector view of η = 1, off the observer's axis.
+    fn multi_centre_view(resolution: [u32; 2]) -> View {
+        View {
+            resolution,
+            region: [-0.15, -0.1, 0.3, 0.2],
+            eye: [0.4, 0.0, 1.5],
+            observer: [-0.1, 0.05, 0.9],
+            eta: 1.0,
+        }
+    }
+
     fn cube(c: DVec3, r: f64) -> [DVec3; 8] {
         std::array::from_fn(|i| {
             c + DVec3::new(
@@ -354,13 +367,7 @@ mod tests {
     fn bounds_hold_every_ray_that_meets_the_box() {
         let views = [
             View::window([64, 48], [0.3, 0.2], [0.02, -0.01, 0.8]),
-            View {
-                resolution: [64, 48],
-                region: [-0.15, -0.1, 0.3, 0.2],
-                eye: [0.4, 0.0, 1.5],
-                observer: [-0.1, 0.05, 0.9],
-                eta: 1.0,
-            },
+            multi_centre_view([64, 48]),
             View {
                 resolution: [64, 48],
                 region: [-0.15, -0.1, 0.3, 0.2],
@@ -472,13 +479,7 @@ mod tests {
         };
         let views = [
             View::window([96, 72], [0.3, 0.22], [0.02, -0.01, 0.6]),
-            View {
-                resolution: [80, 60],
-                region: [-0.15, -0.1, 0.3, 0.2],
-                eye: [0.4, 0.0, 1.5],
-                observer: [-0.1, 0.05, 0.9],
-                eta: 1.0,
-            },
+            multi_centre_view([80, 60]),
         ];
         for subframe in [false, true] {
             let pruned = tiles_in(&views, &scene, &index, Cull::Cells(&cells), subframe, true);
