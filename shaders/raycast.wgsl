@@ -62,7 +62,7 @@ fn first_cell(leaf: Leaf, p: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, len: f32
     let words = leaf.slot;
     for (var i = 0u; i < 3u * n; i = i + 1u) {
         let k = u32(c.x) + n * (u32(c.y) + n * u32(c.z));
-        if (((slots[words].cells[k / 32u] >> (k % 32u)) & 1u) == 0u) {
+        if (!cell_empty(words, k)) {
             return t_in;
         }
         let t_out = min(min(t_max.x, t_max.y), t_max.z);
@@ -120,8 +120,8 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     if (w >= frame.dispatch.x) {
         return;
     }
-    let tile = tiles[w];
-    let view = views[tile.x];
+    let tile = tile_at(w);
+    let view = view_at(tile.x);
     let gid = vec2<u32>(tile.y & 0xFFFFu, tile.y >> 16u) * 8u + lid.xy;
     // size.w = 0: every pixel; 1 + k: only quincunx sub-frame k (frame
     // reconstruction, G10 §5), one pixel of each 2×2 quad at its offset.
@@ -277,7 +277,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 done = true;
                 break;
             }
-            n = index[node];
+            n = node_at(node);
             level = n.data >> 24u;
             let cells = level_cells(level);
             let size = frame.domain.xyz / cells;
@@ -337,7 +337,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             h = max(2.0 * step_factor * (t_base + t) * sin_half, voxel / 64.0);
         }
         if (ISO && sparse) {
-            h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slots[slot].range.z));
+            h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slot_range(slot).z));
         }
         // Samples fall at t + k·h (and where the leaf ends or a tool's
         // boundary lies).

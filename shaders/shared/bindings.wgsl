@@ -45,7 +45,7 @@ struct GpuFrame {
     tf_mids: vec4<u32>,   // offset of the bin midpoint values in a table part, 0, 0, 0
     lod: vec4<f32>,       // multilevel sampling: accuracy (pixels per voxel), light field s0 (m), tan(Φ/2), light field (1) or not (0)
     splits: vec4<u32>,    // per axis, the levels that halve it (bit l: level l against l − 1), 0
-    dispatch: vec4<u32>,  // tiles listed in `tiles` for this dispatch, 0, 0, 0
+    dispatch: vec4<u32>,  // tiles this dispatch runs; first texel of the index, of the tiles in `frame_table`; 0
 }
 
 // A tool's constant parameters (their meaning is the enhancer's: see
@@ -58,18 +58,18 @@ struct ToolParams {
 }
 
 @group(0) @binding(0) var<uniform> frame: GpuFrame;
-@group(0) @binding(1) var<storage, read> views: array<GpuView>;
-@group(0) @binding(2) var<storage, read> index: array<IndexNode>;
+// The frame's views, spatial index and tiles, in texels of four words
+// (backend/src/raycast/texels.rs: a CPU device reads a storage buffer one
+// lane and word at a time, a texture by gathers): `view_at`, `node_at`,
+// `tile_at`.
+@group(0) @binding(1) var frame_table: texture_2d<u32>;
 @group(0) @binding(3) var pool: texture_3d<f32>;
-// Per pool slot: its value range, and its empty macrocells (L12 §4.1): 16
-// words of bits, one per cell of the brick (C³ ≤ 512 cells of M³ voxels),
-// set where the transfer function is τ ≡ 0 over every value interpolation
-// there can give.
-struct Slot {
-    range: vec4<f32>,         // min, max − min, variance on [0, 1] among bricks, 0
-    cells: array<u32, 16>,
-}
-@group(0) @binding(4) var<storage, read> slots: array<Slot>;
+// Per pool slot, in 5 texels (backend/src/raycast/pool.rs): its value
+// range (min, max − min, variance on [0, 1] among bricks, 0; f32 bits),
+// then its empty macrocells (L12 §4.1): 16 words of bits, one per cell of
+// the brick (C³ ≤ 512 cells of M³ voxels), set where the transfer function
+// is τ ≡ 0 over every value interpolation there can give.
+@group(0) @binding(4) var slot_table: texture_2d<u32>;
 // (τ, k̃r, k̃g, k̃b) interleaved: node values, then the pyramid levels.
 @group(0) @binding(5) var<storage, read> table: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> feedback: array<u32>;
@@ -85,9 +85,48 @@ struct Slot {
 // otherwise) and its bilinear sampler.
 @group(0) @binding(12) var preint_grid: texture_2d<f32>;
 @group(0) @binding(13) var grid_sampler: sampler;
-// The 8×8 tiles the dispatch runs, one per workgroup: (view, tile x | tile
-// y << 16) (backend/src/raycast/tiles.rs).
-@group(0) @binding(14) var<storage, read> tiles: array<vec2<u32>>;
+
+// Texel `i` of a table, 4096 texels a row (texels::ROW).
+fn texel_at(table: texture_2d<u32>, i: u32) -> vec4<u32> {
+    return textureLoad(table, vec2<u32>(i & 4095u, i >> 12u), 0);
+}
+
+fn view_at(i: u32) -> GpuView {
+    let t = 4u * i;
+    return GpuView(bitcast<vec4<f32>>(texel_at(frame_table, t)),
+                   bitcast<vec4<f32>>(texel_at(frame_table, t + 1u)),
+                   bitcast<vec4<f32>>(texel_at(frame_table, t + 2u)),
+                   texel_at(frame_table, t + 3u));
+}
+
+// Node `i` of the spatial index (the texels an unused field lies in are
+// not read: the compiler drops them).
+fn node_at(i: u32) -> IndexNode {
+    let t = frame.dispatch.y + 2u * i;
+    let a = texel_at(frame_table, t);
+    let b = texel_at(frame_table, t + 1u);
+    return IndexNode(a.x, a.y, a.z, a.w, b.x, b.y);
+}
+
+// The 8×8 tile workgroup `w` runs: (view, tile x | tile y << 16)
+// (backend/src/raycast/tiles.rs), two a texel.
+fn tile_at(w: u32) -> vec2<u32> {
+    let t = texel_at(frame_table, frame.dispatch.z + (w >> 1u));
+    return select(t.xy, t.zw, (w & 1u) == 1u);
+}
+
+// A pool slot's value range (min, max − min, variance, 0).
+fn slot_range(slot: u32) -> vec4<f32> {
+    return bitcast<vec4<f32>>(texel_at(slot_table, 5u * slot));
+}
+
+// Whether macrocell `k` of a pool slot is empty.
+fn cell_empty(slot: u32, k: u32) -> bool {
+    let t = texel_at(slot_table, 5u * slot + 1u + k / 128u);
+    let w = (k / 32u) % 4u;
+    let word = select(select(t.x, t.y, w == 1u), select(t.z, t.w, w == 3u), w >= 2u);
+    return ((word >> (k % 32u)) & 1u) != 0u;
+}
 
 // The octree's levels (backend/src/store/layout.rs): level l halves axis a
 // against level l − 1 where bit l of frame.splits[a] is set (all three in

@@ -45,7 +45,7 @@ fn make_leaf(node: u32, level: u32, cell: vec3<f32>, slot: u32) -> Leaf {
                     vec3<f32>(OVERLAP - 0.5) - cell * f32(frame.counts.x));
     if (slot != NO_SLOT) {
         leaf.origin = slot_origin(slot);
-        leaf.range = slots[slot].range.xy;
+        leaf.range = slot_range(slot).xy;
     }
     return leaf;
 }
@@ -208,7 +208,7 @@ fn levels_of(leaf: Leaf, n: IndexNode) -> Levels {
     if (pi == NONE16) {
         return lv;
     }
-    let pn = index[pi];
+    let pn = node_at(pi);
     lv.up = make_leaf(pi, leaf.level - 1u, floor(leaf.cell / vec3<f32>(level_split(leaf.level) + 1u)),
                  pn.data & NO_SLOT);
     let gi = pn.tree & 0xFFFFu;
@@ -216,7 +216,7 @@ fn levels_of(leaf: Leaf, n: IndexNode) -> Levels {
         return lv;
     }
     lv.up2 = make_leaf(gi, leaf.level - 2u, floor(lv.up.cell / vec3<f32>(level_split(leaf.level - 1u) + 1u)),
-                  index[gi].data & NO_SLOT);
+                  node_at(gi).data & NO_SLOT);
     return lv;
 }
 

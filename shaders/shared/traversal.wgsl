@@ -6,7 +6,7 @@
 fn descend(start: u32, u: vec3<f32>) -> u32 {
     var i = start;
     loop {
-        let n = index[i];
+        let n = node_at(i);
         let first = n.tree >> 16u;
         if (first == NONE16) {
             break;

@@ -5,6 +5,7 @@
 pub mod params;
 pub mod pool;
 pub mod shader;
+pub mod texels;
 pub mod tiles;
 
 use crate::gpu::Gpu;
@@ -437,8 +438,9 @@ impl Grown {
 /// function's table or the brick pool is another one.
 struct FrameBuffers {
     uniform: wgpu::Buffer,
-    views: Grown,
-    index: Grown,
+    /// The views, the spatial index and the tiles the dispatch runs
+    /// (`tiles::tiles`), one after the other (`FrameTable`).
+    table: texels::TexelTable,
     feedback: Grown,
     image: Grown,
     readback: Grown,
@@ -446,8 +448,6 @@ struct FrameBuffers {
     /// mean nothing after it is made or grown.
     prediction: Grown,
     prediction_fresh: bool,
-    /// The tiles the dispatch runs (`tiles::tiles`).
-    tiles: Grown,
     /// Samples taken this frame, a 64-bit count in two words (counted only
     /// when asked for).
     counters: wgpu::Buffer,
@@ -464,8 +464,6 @@ pub struct FrameBufferCounts {
     pub bind_groups: u64,
 }
 
-const STORAGE_IN: wgpu::BufferUsages =
-    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_DST);
 const FEEDBACK: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_SRC)
     .union(wgpu::BufferUsages::COPY_DST);
@@ -487,14 +485,12 @@ impl FrameBuffers {
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
-            views: Grown::new(gpu, "views", STORAGE_IN, 0),
-            index: Grown::new(gpu, "spatial index", STORAGE_IN, 0),
+            table: texels::TexelTable::new(gpu, "views, spatial index and tiles", 0),
             feedback: Grown::new(gpu, "visibility feedback", FEEDBACK, 0),
             image: Grown::new(gpu, "image", IMAGE, 0),
             readback: Grown::new(gpu, "readback", READBACK, 0),
             prediction: Grown::new(gpu, "prediction buffer", PREDICTION, 0),
             prediction_fresh: true,
-            tiles: Grown::new(gpu, "tiles", STORAGE_IN, 0),
             counters: gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("sample counters"),
                 size: COUNTERS,
@@ -503,7 +499,7 @@ impl FrameBuffers {
             }),
             bind: None,
             made: FrameBufferCounts {
-                buffers: 9,
+                buffers: 7,
                 bind_groups: 0,
             },
         }
@@ -511,25 +507,56 @@ impl FrameBuffers {
 
     /// Grows what this frame needs; drops the bind group if anything it
     /// names changed.
-    fn fit(&mut self, gpu: &Gpu, views: u64, index: u64, image: u64, tiles: u64) {
+    fn fit(&mut self, gpu: &Gpu, texels: u64, nodes: u64, image: u64) {
+        let feedback = nodes * 4;
         let grown = [
-            self.views.fit(gpu, "views", STORAGE_IN, views),
-            self.index.fit(gpu, "spatial index", STORAGE_IN, index),
+            self.table.fit(gpu, texels),
             self.feedback
-                .fit(gpu, "visibility feedback", FEEDBACK, index / 6),
+                .fit(gpu, "visibility feedback", FEEDBACK, feedback),
             self.image.fit(gpu, "image", IMAGE, image),
             self.prediction
                 .fit(gpu, "prediction buffer", PREDICTION, image / 4),
-            self.tiles.fit(gpu, "tiles", STORAGE_IN, tiles),
         ];
-        self.prediction_fresh |= grown[4];
+        self.prediction_fresh |= grown[3];
         let readback = self
             .readback
-            .fit(gpu, "readback", READBACK, image + index / 6 + COUNTERS);
+            .fit(gpu, "readback", READBACK, image + feedback + COUNTERS);
         self.made.buffers += grown.iter().filter(|&&g| g).count() as u64 + readback as u64;
         if grown.contains(&true) {
             self.bind = None;
         }
+    }
+}
+
+/// The views, index nodes and tiles of a frame as the kernel reads them
+/// (WGSL `view_at`, `node_at`, `tile_at`): each view in 4 texels from
+/// texel 0, each node in 2 from `index`, two tiles a texel from `tiles`.
+struct FrameTable {
+    texels: Vec<[u32; 4]>,
+    index: u32,
+    tiles: u32,
+}
+
+fn frame_table(views: &[GpuView], index: &SpatialIndex, tiles: &[[u32; 2]]) -> FrameTable {
+    let mut texels = Vec::with_capacity(4 * views.len() + 2 * index.len() + tiles.len() / 2 + 1);
+    let bits = |v: [f32; 4]| v.map(f32::to_bits);
+    for v in views {
+        texels.extend([bits(v.region), bits(v.eye), bits(v.observer), v.size]);
+    }
+    let first_node = texels.len() as u32;
+    for n in &index.nodes {
+        texels.push([n.tree, n.data, n.range, n.nx]);
+        texels.push([n.ny, n.nz, 0, 0]);
+    }
+    let first_tile = texels.len() as u32;
+    for pair in tiles.chunks(2) {
+        let second = pair.get(1).copied().unwrap_or([0; 2]);
+        texels.push([pair[0][0], pair[0][1], second[0], second[1]]);
+    }
+    FrameTable {
+        texels,
+        index: first_node,
+        tiles: first_tile,
     }
 }
 
@@ -630,10 +657,9 @@ impl Raycaster {
                         },
                         count: None,
                     },
-                    storage(1, true),
-                    storage(2, true),
+                    texels::layout_entry(1),
                     texture(3, wgpu::TextureViewDimension::D3, hw_filter),
-                    storage(4, true),
+                    texels::layout_entry(4),
                     storage(5, true),
                     storage(6, false),
                     storage(7, false),
@@ -652,7 +678,6 @@ impl Raycaster {
                     storage(11, false),
                     texture(12, wgpu::TextureViewDimension::D2, grid_filterable),
                     sampler(13, grid_filterable),
-                    storage(14, true),
                 ],
             });
         let grid_sampler = make_sampler(gpu, "2D pre-integration table", grid_filterable);
@@ -848,11 +873,10 @@ impl Raycaster {
         let tiles_start = std::time::Instant::now();
         let tiles = tiles::tiles(views, scene, index, cull, settings.subframe.is_some());
         let tiles_seconds = tiles_start.elapsed().as_secs_f64();
-        frame.dispatch[0] = tiles.len() as u32;
-        let views_bytes = (gviews.len() * std::mem::size_of::<GpuView>()) as u64;
-        let tiles_bytes = std::mem::size_of_val(tiles.as_slice()) as u64;
+        let table = frame_table(&gviews, index, &tiles);
+        frame.dispatch = [tiles.len() as u32, table.index, table.tiles, 0];
         self.frame
-            .fit(gpu, views_bytes, fb_size * 6, img_size, tiles_bytes);
+            .fit(gpu, table.texels.len() as u64, index.len() as u64, img_size);
         // A prediction buffer just made holds nothing: traverse fully.
         let mut prediction_reset = false;
         if frame.predict[0] > 0.0 && self.frame.prediction_fresh {
@@ -863,14 +887,7 @@ impl Raycaster {
         let fr = &self.frame;
         gpu.queue
             .write_buffer(&fr.uniform, 0, bytemuck::bytes_of(&frame));
-        gpu.queue
-            .write_buffer(&fr.views.buffer, 0, bytemuck::cast_slice(&gviews));
-        gpu.queue
-            .write_buffer(&fr.index.buffer, 0, bytemuck::cast_slice(&index.nodes));
-        if !tiles.is_empty() {
-            gpu.queue
-                .write_buffer(&fr.tiles.buffer, 0, bytemuck::cast_slice(&tiles));
-        }
+        fr.table.write(gpu, 0, &table.texels);
         if !matches!(&fr.bind, Some((_, t, p)) if *t == tf.id && *p == pool.id) {
             let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("raycast"),
@@ -882,11 +899,7 @@ impl Raycaster {
                     },
                     wgpu::BindGroupEntry {
                         binding: 1,
-                        resource: fr.views.buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: fr.index.buffer.as_entire_binding(),
+                        resource: wgpu::BindingResource::TextureView(&fr.table.view),
                     },
                     wgpu::BindGroupEntry {
                         binding: 3,
@@ -894,7 +907,7 @@ impl Raycaster {
                     },
                     wgpu::BindGroupEntry {
                         binding: 4,
-                        resource: pool.ranges.as_entire_binding(),
+                        resource: wgpu::BindingResource::TextureView(&pool.slots.view),
                     },
                     wgpu::BindGroupEntry {
                         binding: 5,
@@ -933,10 +946,6 @@ impl Raycaster {
                     wgpu::BindGroupEntry {
                         binding: 13,
                         resource: wgpu::BindingResource::Sampler(&self.grid_sampler),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 14,
-                        resource: fr.tiles.buffer.as_entire_binding(),
                     },
                 ],
             });

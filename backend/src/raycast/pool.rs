@@ -13,9 +13,10 @@ pub const NO_DATA_VALUE: f32 = 3.0e38;
 /// Bits of one slot's empty-macrocell mask: up to 8³ cells.
 pub const CELL_WORDS: u32 = 16;
 
-/// Bytes of one slot's entry in the ranges buffer: its range (a vec4), then
-/// its cell bits.
-const SLOT_BYTES: u64 = 16 + CELL_WORDS as u64 * 4;
+/// Texels of one slot's entry in the slot table (WGSL `slot_range`,
+/// `cell_empty`): its range (a vec4 of f32 bits), then its cell bits, four
+/// words a texel.
+pub const SLOT_TEXELS: u64 = 1 + CELL_WORDS as u64 / 4;
 
 /// Empty-space skipping inside bricks (L12 §4.1): each slot's B³ core is
 /// cut into C³ macrocells of M³ voxels, and each cell keeps the value range
@@ -133,7 +134,7 @@ impl Macrocells {
 pub struct BrickPool {
     pub(crate) texture: wgpu::Texture,
     pub(crate) view: wgpu::TextureView,
-    pub(crate) ranges: wgpu::Buffer,
+    pub(crate) slots: super::texels::TexelTable,
     /// Empty-space skipping inside bricks.
     pub cells: Macrocells,
     /// Slots that hold a brick.
@@ -202,12 +203,11 @@ impl BrickPool {
         let view = texture.create_view(&Default::default());
         // Per slot (the kernel's `Slot`): its value range (16 bytes), then
         // its empty-macrocell bits.
-        let ranges = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("brick ranges and macrocells"),
-            size: grid.iter().product::<u32>() as u64 * SLOT_BYTES,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let slots = super::texels::TexelTable::new(
+            gpu,
+            "brick ranges and macrocells",
+            grid.iter().product::<u32>() as u64 * SLOT_TEXELS,
+        );
         let total = grid.iter().product::<u32>();
         let (per_axis, voxels) = Macrocells::layout(side.saturating_sub(4));
         let cells = Macrocells {
@@ -221,7 +221,7 @@ impl BrickPool {
         Ok(BrickPool {
             texture,
             view,
-            ranges,
+            slots,
             cells,
             filled: vec![false; total as usize],
             grid,
@@ -274,9 +274,9 @@ impl BrickPool {
         let w = CELL_WORDS as usize;
         for &slot in &c.dirty {
             let words = &c.bits[slot as usize * w..(slot as usize + 1) * w];
-            gpu.queue.write_buffer(
-                &self.ranges,
-                slot as u64 * SLOT_BYTES + 16,
+            self.slots.write(
+                gpu,
+                slot as u64 * SLOT_TEXELS + 1,
                 bytemuck::cast_slice(words),
             );
         }
@@ -398,12 +398,8 @@ impl BrickPool {
             }
         }
         self.filled[slot as usize] = true;
-        let entry = [range[0], range[1], variance.clamp(0.0, 1.0), 0.0];
-        gpu.queue.write_buffer(
-            &self.ranges,
-            slot as u64 * SLOT_BYTES,
-            bytemuck::cast_slice(&entry),
-        );
+        let entry = [range[0], range[1], variance.clamp(0.0, 1.0), 0.0].map(f32::to_bits);
+        self.slots.write(gpu, slot as u64 * SLOT_TEXELS, &[entry]);
         self.uploaded += bytes.len() as u64;
     }
 }
