@@ -71,7 +71,7 @@ struct ToolParams {
 // is τ ≡ 0 over every value interpolation there can give.
 @group(0) @binding(4) var slot_table: texture_2d<u32>;
 // (τ, k̃r, k̃g, k̃b) interleaved: node values, then the pyramid levels.
-@group(0) @binding(5) var<storage, read> table: array<vec4<f32>>;
+@group(0) @binding(5) var tf_table: texture_2d<u32>;
 @group(0) @binding(6) var<storage, read_write> feedback: array<u32>;
 @group(0) @binding(7) var<storage, read_write> image: array<vec4<f32>>;
 @group(0) @binding(8) var pool_sampler: sampler;
@@ -113,6 +113,11 @@ fn node_at(i: u32) -> IndexNode {
 fn tile_at(w: u32) -> vec2<u32> {
     let t = texel_at(frame_table, frame.dispatch.z + (w >> 1u));
     return select(t.xy, t.zw, (w & 1u) == 1u);
+}
+
+// Entry `i` of the pre-integration table.
+fn tf_entry(i: u32) -> vec4<f32> {
+    return bitcast<vec4<f32>>(texel_at(tf_table, i));
 }
 
 // A pool slot's value range (min, max − min, variance, 0).

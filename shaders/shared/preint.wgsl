@@ -18,8 +18,8 @@ fn tf_offset(k: u32) -> u32 {
 // in a bin without a control point inside, the transfer function exactly):
 // f at the centre plus f''·w²/24, exact, no division.
 fn bin_average(base: u32, j: u32, ta: f32, tb: f32) -> vec4<f32> {
-    return quadratic_average(table[base + j], table[base + frame.tf_mids.x + j],
-                             table[base + j + 1u], ta, tb);
+    return quadratic_average(tf_entry(base + j), tf_entry(base + frame.tf_mids.x + j),
+                             tf_entry(base + j + 1u), ta, tb);
 }
 
 // The same for the quadratic through a (0), m (½), b (1) given by value;
@@ -64,7 +64,7 @@ fn segment_average(base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
         // node: (hi_b − hi_a) + (lo_b − lo_a); exact zero for no bins.
         let a = prefix + 2u * lo;
         let b = prefix + 2u * jb;
-        sum = sum + (table[b] - table[a]) + (table[b + 1u] - table[a + 1u]);
+        sum = sum + (tf_entry(b) - tf_entry(a)) + (tf_entry(b + 1u) - tf_entry(a + 1u));
         lo = jb;
     }
     let top = frame.counts.z - 1u;
@@ -77,7 +77,7 @@ fn segment_average(base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
         while ((1u << k) > jb - lo) {
             k = k - 1u;
         }
-        sum = sum + table[base + tf_offset(k) + (lo >> k)];
+        sum = sum + tf_entry(base + tf_offset(k) + (lo >> k));
         lo = lo + (1u << k);
     }
     if (jb < n) {
@@ -133,12 +133,12 @@ fn tf_end(s: f32) -> TfEnd {
     e.u = clamp((s - frame.tf.x) / frame.tf.y, 0.0, f32(n));
     e.j = min(u32(e.u), n - 1u);
     let x = e.u - f32(e.j);
-    e.a = table[e.j];
-    e.b = table[e.j + 1u];
-    e.m = table[frame.tf_mids.x + e.j];
+    e.a = tf_entry(e.j);
+    e.b = tf_entry(e.j + 1u);
+    e.m = tf_entry(frame.tf_mids.x + e.j);
     let p = frame.counts.w + 2u * e.j;
-    e.hi = table[p];
-    e.lo = table[p + 1u];
+    e.hi = tf_entry(p);
+    e.lo = tf_entry(p + 1u);
     e.below = quadratic_integral(e.a, e.m, e.b, x);
     e.above = quadratic_integral(e.b, e.m, e.a, 1.0 - x);
     return e;

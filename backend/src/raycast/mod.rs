@@ -33,7 +33,8 @@ use wgpu::util::DeviceExt;
 /// integral suffers cannot reach a visible size. Extreme ranges (say
 /// τ = 1e-6 beside 1e6) keep the pyramid alone.
 pub struct TfTable {
-    buffer: wgpu::Buffer,
+    /// The table's entries (WGSL `tf_entry`).
+    buffer: texels::TexelTable,
     layout: PreintLayout,
     /// Index (in vec4 entries) of the F_j pairs, 0 when not used.
     prefix_offset: u32,
@@ -134,13 +135,9 @@ impl TfTable {
                 None,
             ],
         );
-        let buffer = gpu
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("pre-integration table"),
-                contents: bytemuck::cast_slice(&data),
-                usage: wgpu::BufferUsages::STORAGE,
-            });
+        let texels: Vec<[u32; 4]> = data.iter().map(|v| v.map(f32::to_bits)).collect();
+        let buffer = texels::TexelTable::new(gpu, "pre-integration table", texels.len() as u64);
+        buffer.write(gpu, 0, &texels);
         let end_allowed = prefix_offset != 0
             && [
                 Channel::Tau,
@@ -660,7 +657,7 @@ impl Raycaster {
                     texels::layout_entry(1),
                     texture(3, wgpu::TextureViewDimension::D3, hw_filter),
                     texels::layout_entry(4),
-                    storage(5, true),
+                    texels::layout_entry(5),
                     storage(6, false),
                     storage(7, false),
                     sampler(8, hw_filter),
@@ -911,7 +908,7 @@ impl Raycaster {
                     },
                     wgpu::BindGroupEntry {
                         binding: 5,
-                        resource: tf.buffer.as_entire_binding(),
+                        resource: wgpu::BindingResource::TextureView(&tf.buffer.view),
                     },
                     wgpu::BindGroupEntry {
                         binding: 6,
