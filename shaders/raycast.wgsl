@@ -216,7 +216,8 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     var inv_d = 1.0 / select(d, vec3<f32>(1e-30), abs(d) < vec3<f32>(1e-30));
     var t = span.x;
     var probe = (o + d * t) / frame.domain.xyz + nudge;
-    var node = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+    var found = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+    var node = found.node;
     var s_prev = 0.0;
     var e_prev: TfEnd;
     var have_prev = false;
@@ -236,6 +237,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     var axis = 0u;
     var last = false;
     var slot = NO_SLOT;
+    var values = vec2<f32>(0.0);
     var advance = false;
     var visited = 0u;
     loop {
@@ -269,7 +271,8 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 } else {
                     probe[axis] = lo_u[axis] - 2.0 * eps;
                 }
-                node = descend(next, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+                found = descend(next, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+                node = found.node;
             }
             advance = true;
             visited = visited + 1u;
@@ -277,7 +280,10 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 done = true;
                 break;
             }
-            n = node_at(node);
+            // `descend` has read the node's first texel.
+            let b = texel_at(frame_table, node_texel(node) + 1u);
+            n = node_of(found.a, b);
+            values = bitcast<vec2<f32>>(b.zw);
             level = n.data >> 24u;
             let cells = level_cells(level);
             let size = frame.domain.xyz / cells;
@@ -313,7 +319,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             break;
         }
         var bent = false;
-        let leaf = make_leaf(node, level, cell, slot);
+        let leaf = make_leaf(node, level, cell, slot, values);
         // Multilevel sampling blends in coarser levels only in leaves
         // that the view needs coarser somewhere along the ray (the
         // footprint grows monotonically along a ray from the observer;
@@ -534,7 +540,8 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             ray.n_breaks = 0u;
             chain_start(&ray);
             probe = o / frame.domain.xyz + nudge;
-            node = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+            found = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+            node = found.node;
             advance = false;
             continue;
         }

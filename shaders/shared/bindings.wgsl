@@ -86,9 +86,9 @@ struct ToolParams {
 @group(0) @binding(12) var preint_grid: texture_2d<f32>;
 @group(0) @binding(13) var grid_sampler: sampler;
 
-// Texel `i` of a table, 4096 texels a row (texels::ROW).
+// Texel `i` of a table, 256 texels a row (texels::ROW).
 fn texel_at(table: texture_2d<u32>, i: u32) -> vec4<u32> {
-    return textureLoad(table, vec2<u32>(i & 4095u, i >> 12u), 0);
+    return textureLoad(table, vec2<u32>(i & 255u, i >> 8u), 0);
 }
 
 fn view_at(i: u32) -> GpuView {
@@ -99,13 +99,27 @@ fn view_at(i: u32) -> GpuView {
                    texel_at(frame_table, t + 3u));
 }
 
-// Node `i` of the spatial index (the texels an unused field lies in are
-// not read: the compiler drops them).
-fn node_at(i: u32) -> IndexNode {
-    let t = frame.dispatch.y + 2u * i;
-    let a = texel_at(frame_table, t);
-    let b = texel_at(frame_table, t + 1u);
+// Node `i` of the spatial index is two texels from `node_texel(i)`:
+// (tree, data, range, nx) and (ny, nz, and the value range of its pool
+// slot: min, max − min as f32 bits). A texel whose fields are not used is
+// not read (the compiler drops it).
+fn node_texel(i: u32) -> u32 {
+    return frame.dispatch.y + 2u * i;
+}
+
+fn node_of(a: vec4<u32>, b: vec4<u32>) -> IndexNode {
     return IndexNode(a.x, a.y, a.z, a.w, b.x, b.y);
+}
+
+fn node_at(i: u32) -> IndexNode {
+    let t = node_texel(i);
+    return node_of(texel_at(frame_table, t), texel_at(frame_table, t + 1u));
+}
+
+// The data values of node `i`'s brick: min, max − min (the slot's range,
+// copied into the node so that entering a leaf reads no slot texel).
+fn node_values(i: u32) -> vec2<f32> {
+    return bitcast<vec2<f32>>(texel_at(frame_table, node_texel(i) + 1u).zw);
 }
 
 // The 8×8 tile workgroup `w` runs: (view, tile x | tile y << 16)

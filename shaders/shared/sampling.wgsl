@@ -39,13 +39,13 @@ struct Leaf {
 // The leaf `node` of `level` at brick coordinates `cell`, its data in `slot`
 // (where it has data: the slot's place and range are read once per leaf,
 // not per sample).
-fn make_leaf(node: u32, level: u32, cell: vec3<f32>, slot: u32) -> Leaf {
+fn make_leaf(node: u32, level: u32, cell: vec3<f32>, slot: u32, values: vec2<f32>) -> Leaf {
     let voxel = frame.spacing.xyz * level_scale(level);
     var leaf = Leaf(node, level, cell, slot, voxel, vec3<i32>(0), vec2<f32>(0.0), 1.0 / voxel,
                     vec3<f32>(OVERLAP - 0.5) - cell * f32(frame.counts.x));
     if (slot != NO_SLOT) {
         leaf.origin = slot_origin(slot);
-        leaf.range = slot_range(slot).xy;
+        leaf.range = values;
     }
     return leaf;
 }
@@ -210,13 +210,13 @@ fn levels_of(leaf: Leaf, n: IndexNode) -> Levels {
     }
     let pn = node_at(pi);
     lv.up = make_leaf(pi, leaf.level - 1u, floor(leaf.cell / vec3<f32>(level_split(leaf.level) + 1u)),
-                 pn.data & NO_SLOT);
+                 pn.data & NO_SLOT, node_values(pi));
     let gi = pn.tree & 0xFFFFu;
     if (lv.up.slot == NO_SLOT || gi == NONE16) {
         return lv;
     }
     lv.up2 = make_leaf(gi, leaf.level - 2u, floor(lv.up.cell / vec3<f32>(level_split(leaf.level - 1u) + 1u)),
-                  node_at(gi).data & NO_SLOT);
+                  node_at(gi).data & NO_SLOT, node_values(gi));
     return lv;
 }
 

@@ -2,11 +2,19 @@
 
 #import bindings
 
+// A leaf `descend` found, and the first of its texels (it has read it).
+struct Found {
+    node: u32,
+    a: vec4<u32>,
+}
+
 // Descends from `start` to the leaf containing u (root-box units, [0,1)³).
-fn descend(start: u32, u: vec3<f32>) -> u32 {
+fn descend(start: u32, u: vec3<f32>) -> Found {
     var i = start;
+    var a: vec4<u32>;
     loop {
-        let n = node_at(i);
+        a = texel_at(frame_table, node_texel(i));
+        let n = node_of(a, vec4<u32>(0u));
         let first = n.tree >> 16u;
         if (first == NONE16) {
             break;
@@ -18,7 +26,7 @@ fn descend(start: u32, u: vec3<f32>) -> u32 {
         let c = vec3<u32>(floor(u * level_cells(level))) & s;
         i = first + (c.x | (c.y << s.x) | (c.z << (s.x + s.y)));
     }
-    return i;
+    return Found(i, a);
 }
 
 fn neighbour(n: IndexNode, axis: u32, plus: bool) -> u32 {

@@ -438,6 +438,8 @@ struct FrameBuffers {
     /// The views, the spatial index and the tiles the dispatch runs
     /// (`tiles::tiles`), one after the other (`FrameTable`).
     table: texels::TexelTable,
+    /// What `table` is copied from each frame, in whole rows.
+    table_staging: Grown,
     feedback: Grown,
     image: Grown,
     readback: Grown,
@@ -470,6 +472,8 @@ const IMAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
 const PREDICTION: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE;
 /// Bytes of the sample counters.
 const COUNTERS: u64 = 16;
+const STAGING: wgpu::BufferUsages =
+    wgpu::BufferUsages::COPY_SRC.union(wgpu::BufferUsages::COPY_DST);
 const READBACK: wgpu::BufferUsages =
     wgpu::BufferUsages::MAP_READ.union(wgpu::BufferUsages::COPY_DST);
 
@@ -483,6 +487,7 @@ impl FrameBuffers {
                 mapped_at_creation: false,
             }),
             table: texels::TexelTable::new(gpu, "views, spatial index and tiles", 0),
+            table_staging: Grown::new(gpu, "views, spatial index and tiles (staging)", STAGING, 0),
             feedback: Grown::new(gpu, "visibility feedback", FEEDBACK, 0),
             image: Grown::new(gpu, "image", IMAGE, 0),
             readback: Grown::new(gpu, "readback", READBACK, 0),
@@ -496,7 +501,7 @@ impl FrameBuffers {
             }),
             bind: None,
             made: FrameBufferCounts {
-                buffers: 7,
+                buffers: 8,
                 bind_groups: 0,
             },
         }
@@ -515,10 +520,17 @@ impl FrameBuffers {
                 .fit(gpu, "prediction buffer", PREDICTION, image / 4),
         ];
         self.prediction_fresh |= grown[3];
+        let staging = self.table_staging.fit(
+            gpu,
+            "views, spatial index and tiles (staging)",
+            STAGING,
+            self.table.capacity() * 16,
+        );
         let readback = self
             .readback
             .fit(gpu, "readback", READBACK, image + feedback + COUNTERS);
-        self.made.buffers += grown.iter().filter(|&&g| g).count() as u64 + readback as u64;
+        self.made.buffers +=
+            grown.iter().filter(|&&g| g).count() as u64 + readback as u64 + staging as u64;
         if grown.contains(&true) {
             self.bind = None;
         }
@@ -527,14 +539,20 @@ impl FrameBuffers {
 
 /// The views, index nodes and tiles of a frame as the kernel reads them
 /// (WGSL `view_at`, `node_at`, `tile_at`): each view in 4 texels from
-/// texel 0, each node in 2 from `index`, two tiles a texel from `tiles`.
+/// texel 0, each node in 2 from `index` (with its slot's data values:
+/// entering a leaf reads no slot texel), two tiles a texel from `tiles`.
 struct FrameTable {
     texels: Vec<[u32; 4]>,
     index: u32,
     tiles: u32,
 }
 
-fn frame_table(views: &[GpuView], index: &SpatialIndex, tiles: &[[u32; 2]]) -> FrameTable {
+fn frame_table(
+    views: &[GpuView],
+    index: &SpatialIndex,
+    pool: &BrickPool,
+    tiles: &[[u32; 2]],
+) -> FrameTable {
     let mut texels = Vec::with_capacity(4 * views.len() + 2 * index.len() + tiles.len() / 2 + 1);
     let bits = |v: [f32; 4]| v.map(f32::to_bits);
     for v in views {
@@ -543,7 +561,11 @@ fn frame_table(views: &[GpuView], index: &SpatialIndex, tiles: &[[u32; 2]]) -> F
     let first_node = texels.len() as u32;
     for n in &index.nodes {
         texels.push([n.tree, n.data, n.range, n.nx]);
-        texels.push([n.ny, n.nz, 0, 0]);
+        let [lo, span] = n
+            .slot()
+            .and_then(|s| pool.values.get(s as usize))
+            .map_or([0; 2], |v| v.map(f32::to_bits));
+        texels.push([n.ny, n.nz, lo, span]);
     }
     let first_tile = texels.len() as u32;
     for pair in tiles.chunks(2) {
@@ -870,7 +892,14 @@ impl Raycaster {
         let tiles_start = std::time::Instant::now();
         let tiles = tiles::tiles(views, scene, index, cull, settings.subframe.is_some());
         let tiles_seconds = tiles_start.elapsed().as_secs_f64();
-        let table = frame_table(&gviews, index, &tiles);
+        let table = frame_table(&gviews, index, pool, &tiles);
+        let most = texels::ROW as u64 * dev.limits().max_texture_dimension_2d as u64;
+        if table.texels.len() as u64 > most {
+            bail!(
+                "render: the frame's views, index and tiles need {} texels; the GPU's largest table holds {most}",
+                table.texels.len()
+            );
+        }
         frame.dispatch = [tiles.len() as u32, table.index, table.tiles, 0];
         self.frame
             .fit(gpu, table.texels.len() as u64, index.len() as u64, img_size);
@@ -884,7 +913,11 @@ impl Raycaster {
         let fr = &self.frame;
         gpu.queue
             .write_buffer(&fr.uniform, 0, bytemuck::bytes_of(&frame));
-        fr.table.write(gpu, 0, &table.texels);
+        let mut texels = table.texels;
+        let rows = texels.len().div_ceil(texels::ROW as usize);
+        texels.resize(rows * texels::ROW as usize, [0; 4]);
+        gpu.queue
+            .write_buffer(&fr.table_staging.buffer, 0, bytemuck::cast_slice(&texels));
         if !matches!(&fr.bind, Some((_, t, p)) if *t == tf.id && *p == pool.id) {
             let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("raycast"),
@@ -971,6 +1004,8 @@ impl Raycaster {
         let fr = &self.frame;
         let bind = &fr.bind.as_ref().expect("made above").0;
         let mut enc = dev.create_command_encoder(&Default::default());
+        fr.table
+            .copy_rows(&mut enc, &fr.table_staging.buffer, rows as u32);
         // One zeroing per frame for all views (G10 §5).
         enc.clear_buffer(&fr.feedback.buffer, 0, Some(fb_size));
         if settings.count_samples {

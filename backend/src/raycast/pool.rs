@@ -139,6 +139,9 @@ pub struct BrickPool {
     pub cells: Macrocells,
     /// Slots that hold a brick.
     filled: Vec<bool>,
+    /// Per slot, the data values its texels map to: min, max − min (the
+    /// kernel reads them with the index node, `frame_table`).
+    pub(crate) values: Vec<[f32; 2]>,
     /// Slots along x, y, z.
     pub grid: [u32; 3],
     /// Texels per side of a slot.
@@ -224,6 +227,7 @@ impl BrickPool {
             slots,
             cells,
             filled: vec![false; total as usize],
+            values: vec![[0.0; 2]; total as usize],
             grid,
             side,
             float,
@@ -398,6 +402,7 @@ impl BrickPool {
             }
         }
         self.filled[slot as usize] = true;
+        self.values[slot as usize] = [range[0], range[1]];
         let entry = [range[0], range[1], variance.clamp(0.0, 1.0), 0.0].map(f32::to_bits);
         self.slots.write(gpu, slot as u64 * SLOT_TEXELS, &[entry]);
         self.uploaded += bytes.len() as u64;

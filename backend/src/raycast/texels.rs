@@ -14,8 +14,12 @@
 use crate::gpu::Gpu;
 
 /// Texels per row (a power of two: the kernel splits an index with a mask
-/// and a shift).
-pub const ROW: u32 = 4096;
+/// and a shift). Narrow on purpose: with rows of 4096 texels (64 KiB)
+/// lavapipe's resident memory grew by about half a MiB with every dispatch
+/// that bound such a texture, whether or not the kernel read it, and the
+/// tables were written or not; with rows of 256 it stays flat (the live
+/// soak test, tests/live.rs).
+pub const ROW: u32 = 256;
 
 /// A texture of `[u32; 4]` texels addressed by one linear index, grown by
 /// whole rows.
@@ -113,6 +117,38 @@ impl TexelTable {
             at += n as u64;
             rest = later;
         }
+    }
+}
+
+impl TexelTable {
+    /// Copies the first `rows` rows from `staging` (texels packed in whole
+    /// rows from its start) in the frame's command encoder: a table
+    /// rewritten every frame goes through a buffer of its own, one copy.
+    pub fn copy_rows(&self, enc: &mut wgpu::CommandEncoder, staging: &wgpu::Buffer, rows: u32) {
+        if rows == 0 {
+            return;
+        }
+        enc.copy_buffer_to_texture(
+            wgpu::TexelCopyBufferInfo {
+                buffer: staging,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(ROW * 16),
+                    rows_per_image: None,
+                },
+            },
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::Extent3d {
+                width: ROW,
+                height: rows,
+                depth_or_array_layers: 1,
+            },
+        );
     }
 }
 
