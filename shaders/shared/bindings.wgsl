@@ -46,6 +46,8 @@ struct GpuFrame {
     lod: vec4<f32>,       // multilevel sampling: accuracy (pixels per voxel), light field s0 (m), tan(Φ/2), light field (1) or not (0)
     splits: vec4<u32>,    // per axis, the levels that halve it (bit l: level l against l − 1), 0
     dispatch: vec4<u32>,  // tiles this dispatch runs; first texel of the index, of the tiles in `frame_table`; 0
+    recip: vec4<f32>,     // 1 / the pool's texels along x, y, z; 1 / the table's bin width
+    grid: vec4<f32>,      // 2D table: nodes per data unit, n − 1, 1 / n, 0 (products, not quotients, per sample)
 }
 
 // A tool's constant parameters (their meaning is the enhancer's: see

@@ -43,8 +43,8 @@ fn quadratic_integral(a: vec4<f32>, m: vec4<f32>, b: vec4<f32>, x: f32) -> vec4<
 
 fn segment_average(base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
     let n = u32(frame.tf.z);
-    var ua = clamp((sa - frame.tf.x) / frame.tf.y, 0.0, f32(n));
-    var ub = clamp((sb - frame.tf.x) / frame.tf.y, 0.0, f32(n));
+    var ua = clamp((sa - frame.tf.x) * frame.recip.w, 0.0, f32(n));
+    var ub = clamp((sb - frame.tf.x) * frame.recip.w, 0.0, f32(n));
     if (ua > ub) {
         let t = ua;
         ua = ub;
@@ -115,11 +115,10 @@ override END_PREINT: bool = false;
 override GRID_PREINT: bool = false;
 
 fn grid_average(sa: f32, sb: f32) -> vec4<f32> {
-    let n = frame.tf.w;
-    let k = (n - 1.0) / frame.tf.z;
-    let ga = clamp((sa - frame.tf.x) / frame.tf.y, 0.0, frame.tf.z) * k;
-    let gb = clamp((sb - frame.tf.x) / frame.tf.y, 0.0, frame.tf.z) * k;
-    return max(textureSampleLevel(preint_grid, grid_sampler, (vec2<f32>(ga, gb) + 0.5) / n, 0.0),
+    // Table node coordinates of the two values, by products (a division
+    // per sample is a slow SIMD instruction on a CPU device).
+    let g = clamp((vec2<f32>(sa, sb) - frame.tf.x) * frame.grid.x, vec2<f32>(0.0), vec2<f32>(frame.grid.y));
+    return max(textureSampleLevel(preint_grid, grid_sampler, (g + 0.5) * frame.grid.z, 0.0),
                vec4<f32>(0.0));
 }
 
@@ -130,7 +129,7 @@ fn tf_end(s: f32) -> TfEnd {
         return e;
     }
     let n = u32(frame.tf.z);
-    e.u = clamp((s - frame.tf.x) / frame.tf.y, 0.0, f32(n));
+    e.u = clamp((s - frame.tf.x) * frame.recip.w, 0.0, f32(n));
     e.j = min(u32(e.u), n - 1u);
     let x = e.u - f32(e.j);
     e.a = tf_entry(e.j);

@@ -69,8 +69,7 @@ fn tap(o: vec3<i32>, i: vec3<i32>) -> f32 {
 // `o`: by the texture unit, or by eight loads with exact f32 weights.
 fn trilinear(o: vec3<i32>, local: vec3<f32>) -> f32 {
     if (HW_FILTER) {
-        let size = vec3<f32>(frame.pool.xyz * frame.pool.w);
-        return textureSampleLevel(pool, pool_sampler, (vec3<f32>(o) + local + 0.5) / size, 0.0).r;
+        return textureSampleLevel(pool, pool_sampler, (vec3<f32>(o) + local + 0.5) * frame.recip.xyz, 0.0).r;
     }
     let f0 = floor(local);
     let w = local - f0;

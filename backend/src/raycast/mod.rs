@@ -1164,6 +1164,19 @@ impl Raycaster {
             },
             splits: [l.splits[0], l.splits[1], l.splits[2], 0],
             dispatch: [0; 4],
+            recip: {
+                let t = |k: usize| 1.0 / (pool.grid[k] * pool.side) as f32;
+                [t(0), t(1), t(2), (1.0 / tf.layout.bin_width) as f32]
+            },
+            grid: {
+                let n = tf.grid.as_ref().map_or(0.0, |g| g.2 as f32);
+                [
+                    (n - 1.0) / tf.layout.n_bins as f32 / tf.layout.bin_width as f32,
+                    n - 1.0,
+                    1.0 / n.max(1.0),
+                    0.0,
+                ]
+            },
         }
     }
 }

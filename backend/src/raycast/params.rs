@@ -59,8 +59,14 @@ pub struct GpuFrame {
     /// The octree's split masks per axis (`OctreeLayout::splits`: bit l set
     /// where level l halves the axis), 0.
     pub splits: [u32; 4],
-    /// Tiles listed for this dispatch (`tiles`), 0, 0, 0.
+    /// Tiles listed for this dispatch (`tiles`), first texel of the index
+    /// and of the tiles in the frame table, 0.
     pub dispatch: [u32; 4],
+    /// 1 / the pool's texels along x, y, z; 1 / the table's bin width.
+    pub recip: [f32; 4],
+    /// The 2D table's lookup: table nodes per data unit ((n − 1) / (bins ·
+    /// bin width)), n − 1, 1 / n, 0.
+    pub grid: [f32; 4],
 }
 
 /// WGSL `ToolParams`: one tool's constant parameters (meaning per enhancer,
