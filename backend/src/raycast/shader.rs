@@ -420,7 +420,7 @@ mod tests {
             GpuFrame,
             [
                 rt0, rt1, rt2, center, extent, domain, spacing, tf, render, light, counts, pool,
-                optics, aux, iso, predict, tf_offsets, tf_mids, lod, splits, dispatch
+                optics, aux, iso, predict, tf_offsets, tf_mids, lod, splits, dispatch, recip, grid
             ]
         );
         check!("IndexNode", IndexNode, [tree, data, range, nx, ny, nz]);
