@@ -116,6 +116,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     // meet data, backend/src/raycast/tiles.rs): its view and place, read
     // at the workgroup's index, a value a compiler can know to be uniform
     // across the workgroup.
+    load_constants();
     let w = wg.x + wg.y * groups.x;
     if (w >= frame.dispatch.x) {
         return;

@@ -59,7 +59,15 @@ struct ToolParams {
     d: vec4<f32>,
 }
 
-@group(0) @binding(0) var<uniform> frame: GpuFrame;
+// The frame's and the tools' constants are read from private copies that
+// `main` makes at its start (`load_constants`): lavapipe reads a uniform
+// buffer through a per-lane, bounds-checked gather wherever it cannot prove
+// the offset uniform, and it did so for every use of these fields inside
+// the sample loop; a copy is read once per ray and then lives in registers
+// or on the stack. On the Colin27 brain at 5 mm it took 12–15 % off the
+// frame (docs/figures.md). On a GPU the copy costs nothing that matters.
+@group(0) @binding(0) var<uniform> frame_uniform: GpuFrame;
+var<private> frame: GpuFrame;
 // The frame's views, spatial index and tiles, in texels of four words
 // (backend/src/raycast/texels.rs: a CPU device reads a storage buffer one
 // lane and word at a time, a texture by gathers): `view_at`, `node_at`,
@@ -77,7 +85,8 @@ struct ToolParams {
 @group(0) @binding(6) var<storage, read_write> feedback: array<u32>;
 @group(0) @binding(7) var<storage, read_write> image: array<vec4<f32>>;
 @group(0) @binding(8) var pool_sampler: sampler;
-@group(0) @binding(9) var<uniform> tools: array<ToolParams, 3>;
+@group(0) @binding(9) var<uniform> tool_uniform: array<ToolParams, 3>;
+var<private> tools: array<ToolParams, 3>;
 // Isosurfaces: each pixel's last hit distance along its ray (volume units),
 // or PB_MISS_SURFACE / PB_MISS_BOX (B10 §4.1). Read and written per pixel.
 @group(0) @binding(10) var<storage, read_write> prediction: array<f32>;
@@ -87,6 +96,11 @@ struct ToolParams {
 // otherwise) and its bilinear sampler.
 @group(0) @binding(12) var preint_grid: texture_2d<f32>;
 @group(0) @binding(13) var grid_sampler: sampler;
+
+fn load_constants() {
+    frame = frame_uniform;
+    tools = tool_uniform;
+}
 
 // Texel `i` of a table, 256 texels a row (texels::ROW).
 fn texel_at(table: texture_2d<u32>, i: u32) -> vec4<u32> {
