@@ -86,7 +86,7 @@ EXTRA_STEPS = [2.0, 4.0]          # coarser, to find equal-error pairs
 # one bilinear fetch a segment), early termination matched, on a finer
 # ladder of steps so that each VTK setting finds its equal-error partner.
 TABLE_STEPS = [0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]
-BIG_BRICK_STEPS = [1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0]
+BIG_BRICK_STEPS = [1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 5.5, 6.0, 7.0, 8.0]
 STAGES = ["refine_ms", "upload_ms", "index_ms", "render_ms", "output_ms", "total_ms"]
 
 
