@@ -64,8 +64,9 @@ struct ToolParams {
 // buffer through a per-lane, bounds-checked gather wherever it cannot prove
 // the offset uniform, and it did so for every use of these fields inside
 // the sample loop; a copy is read once per ray and then lives in registers
-// or on the stack. On the Colin27 brain at 5 mm it took 12–15 % off the
-// frame (docs/figures.md). On a GPU the copy costs nothing that matters.
+// or on the stack. On the Colin27 brain it took 14–21 % off the frame
+// (docs/figures.md, "Constants read once a ray"). On a GPU the copy is one
+// read per ray of the fields the kernel uses.
 @group(0) @binding(0) var<uniform> frame_uniform: GpuFrame;
 var<private> frame: GpuFrame;
 // The frame's views, spatial index and tiles, in texels of four words
