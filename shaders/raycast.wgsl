@@ -217,8 +217,8 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     var inv_d = 1.0 / select(d, vec3<f32>(1e-30), abs(d) < vec3<f32>(1e-30));
     var t = span.x;
     var probe = (o + d * t) / frame.domain.xyz + nudge;
-    var found = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
-    var node = found.node;
+    var found: Found;
+    var node = 0u;
     var s_prev = 0.0;
     var e_prev: TfEnd;
     var have_prev = false;
@@ -249,6 +249,10 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
         // empty space must not include it.
         var done = false;
         loop {
+            // The first descent starts at the root, a later one at the
+            // neighbour across the exit face: one descent in the kernel's
+            // code (a CPU device runs every copy of it on every pass).
+            var start = 0u;
             if (advance) {
                 if (last || terminated(acc)) {
                     done = true;
@@ -272,9 +276,10 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 } else {
                     probe[axis] = lo_u[axis] - 2.0 * eps;
                 }
-                found = descend(next, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
-                node = found.node;
+                start = next;
             }
+            found = descend(start, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+            node = found.node;
             advance = true;
             visited = visited + 1u;
             if (visited > MAX_NODES_PER_RAY) {
@@ -541,10 +546,15 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             ray.n_breaks = 0u;
             chain_start(&ray);
             probe = o / frame.domain.xyz + nudge;
-            found = descend(0u, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
-            node = found.node;
             advance = false;
             continue;
+        }
+        // Ended here: leave the loop now, not at the top of another pass.
+        // A CPU device runs a loop's whole body, masked, until no lane is
+        // left in it; with the test at the top of the next pass, every
+        // group of rays paid one such pass after its last ray had ended.
+        if (last || terminated(acc)) {
+            break;
         }
     }
     ray.dir = d;
