@@ -109,6 +109,22 @@ fn cells_start(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32
     return max(t0 + r0 - margin, t0);
 }
 
+// The place of a leaf's next sample on its grid t + k·h, cut short at the
+// leaf's exit and at a tool's break (`tc`: the last sample's); k moves on
+// when the grid point itself is taken.
+fn next_sample(ray: ptr<function, Ray>, t: f32, h: f32, k: ptr<function, u32>, tc: f32,
+               t_exit: f32) -> f32 {
+    let tk = t + f32(*k) * h;
+    var tn = min(tk, t_exit);
+    if (HAS_BREAKS) {
+        tn = min(tn, next_break(ray, tc));
+    }
+    if (tn >= tk) {
+        *k = *k + 1u;
+    }
+    return tn;
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>,
         @builtin(num_workgroups) groups: vec3<u32>) {
@@ -382,33 +398,40 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             }
         }
         if (!have_prev && !skip_first) {
-            // The leaf's entry value starts the march: the loop's first
-            // sample, at t + 0·h (one sampling path in the kernel, not
-            // two: a CPU device runs every branch of the loop body for
-            // all its lanes, taken or not).
+            // The leaf's entry value starts the march, at t + 0·h.
             k = 0u;
             skip_first = true;
         }
+        if (skip_first) {
+            // The sample that only starts the march (the leaf's entry, or
+            // the last one before its non-empty cells, or its exit), taken
+            // before the loop: a CPU device runs the loop's whole body,
+            // the segment's table lookup and compositing included, for
+            // every pass of any of its lanes; as a pass of the loop this
+            // sample cost a full pass, here it costs a sample.
+            let tn = next_sample(&ray, t, h, &k, tc, t_exit);
+            s_prev = sample_levels(lv, blend, o + d * tn);
+            n_samples = n_samples + 1u;
+            if (!ISO) {
+                e_prev = tf_end(s_prev);
+            }
+            have_prev = true;
+            tc = tn;
+        }
         loop {
-            let tk = t + f32(k) * h;
-            var tn = min(tk, t_exit);
-            if (HAS_BREAKS) {
-                tn = min(tn, next_break(&ray, tc));
+            // An all-empty leaf ends with its starting sample, at its exit.
+            if (tc >= t_exit) {
+                break;
             }
-            if (tn >= tk) {
-                k = k + 1u;
-            }
+            let tn = next_sample(&ray, t, h, &k, tc, t_exit);
             let s = sample_levels(lv, blend, o + d * tn);
             n_samples = n_samples + 1u;
             var e: TfEnd;
             if (!ISO) {
                 e = tf_end(s);
             }
-            // The first sample only starts the march (the leaf's entry, or
-            // the last sample before its non-empty cells), and a segment
-            // with an end that lacks data adds nothing.
-            if (skip_first || (NO_DATA && !ISO && !(has_data(s) && has_data(s_prev)))) {
-                skip_first = false;
+            // A segment with an end that lacks data adds nothing.
+            if (NO_DATA && !ISO && !(has_data(s) && has_data(s_prev))) {
                 have_prev = true;
                 s_prev = s;
                 e_prev = e;
