@@ -233,7 +233,6 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     var inv_d = 1.0 / select(d, vec3<f32>(1e-30), abs(d) < vec3<f32>(1e-30));
     var t = span.x;
     var probe = (o + d * t) / frame.domain.xyz + nudge;
-    var found: Found;
     var node = 0u;
     var s_prev = 0.0;
     var e_prev: TfEnd;
@@ -294,7 +293,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 }
                 start = next;
             }
-            found = descend(start, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+            let found = descend(start, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
             node = found.node;
             advance = true;
             visited = visited + 1u;
