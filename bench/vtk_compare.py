@@ -46,6 +46,16 @@ The machine is shared: every timed section waits until other processes
 have been idle for 10 s and is repeated if they took more than 0.1 core
 meanwhile (columns cores / other_cores).
 
+VTK's times move between processes far more than within one (the brain at
+4 mm: 55 to 86 ms over three runs on one machine, each run's five renders
+within 1 %), and the machine's speed drifts over a run of half an hour. So
+after each case, every VTK setting and its equal-error partner are timed
+again in alternating pairs (--pairs, default 3; the order alternates,
+VTK first in odd pairs), each side in a fresh process (VTK through this
+script's --vtk-time mode): the ratio of the two sides' medians over the
+pairs, and the spread of the pairs' own ratios, go to the summary and to
+bench/vtk_pairs.csv.
+
 Run it through bench/vtk_compare.sh (installs vtk + numpy, imports the two
 databases, builds). Outputs go to out/bench-vtk/ (git-ignored) and the table
 to bench/vtk_results.csv.
@@ -129,9 +139,14 @@ class Meter:
         self.cores = self.cpu / max(self.wall, 1e-9)
 
 
-def wait_idle(limit_cores=0.1, quiet_s=10.0, timeout_s=3600.0):
+# Seconds of quiet a timed section waits for (--quiet).
+QUIET_S = 10.0
+
+
+def wait_idle(limit_cores=0.1, quiet_s=None, timeout_s=3600.0):
     """Waits until other processes have used less than `limit_cores` over
-    `quiet_s` seconds in a row (sampled each second)."""
+    `quiet_s` seconds in a row (sampled each second; QUIET_S by default)."""
+    quiet_s = QUIET_S if quiet_s is None else quiet_s
     t0 = time.time()
     warned = False
     quiet = 0.0
@@ -586,6 +601,99 @@ def vtk_run(v, sample_distance, repeats):
 
 
 # --------------------------------------------------------------------------
+# Alternating pairs: each VTK setting against its equal-error partner, both
+# in fresh processes, the order alternating.
+
+def vtk_time_main(a):
+    """--vtk-time CASE STEP: one VTK set-up (box domain) in this process,
+    `repeats` timed renders at STEP; prints a line VTKTIME {json}."""
+    case_name, step = a.vtk_time[0], float(a.vtk_time[1])
+    case = next(c for c in CASES if c["name"] == case_name)
+    out = Path(a.out)
+    volume = vtk_read_volume() if case["volume"] == "colin27" else read_nrrd(out / "ct256.nrrd")
+    base = tomllib.loads((BENCH / "vtk_scene.toml").read_text())
+    tf = load_tf((BENCH / case["tf"]).resolve())
+    pl = base["placement"]
+    extent = tuple(d * s for d, s in zip(volume[1], volume[2]))
+    placement = Placement(pl["center"], pl["size"], pl["rotation_deg"], extent)
+    v = vtk_setup(tf, placement, a.threads, "box", volume)
+    times, cores, other, fb, rc = vtk_run(v, step, a.repeats)
+    ref = out / f"{case_name}-reference.npy"
+    rmse = image_error(rc, np.load(ref))[0] if ref.exists() else None
+    print("VTKTIME " + json.dumps(dict(times=times, cores=cores, other_cores=other, rmse=rmse)), flush=True)
+    v["win"].Finalize()
+
+
+def vtk_time(a, case_name, step):
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--vtk-time", case_name, str(step),
+           "--repeats", str(a.repeats), "--threads", str(a.threads), "--out", str(Path(a.out).resolve()),
+           "--quiet", str(a.pair_quiet)]
+    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    lines = [l for l in p.stdout.splitlines() if l.startswith("VTKTIME ")]
+    if p.returncode != 0 or not lines:
+        sys.exit(f"VTK timing failed for {case_name} at {step} mm:\n{p.stdout}\n{p.stderr}")
+    return json.loads(lines[-1][len("VTKTIME "):])
+
+
+def confirm_pairs(case, rows, a, px, out, base):
+    """Each VTK setting and its partner, `a.pairs` times in alternating
+    order, each side in a fresh process; one row per pair."""
+    global QUIET_S
+    name = case["name"]
+    result = []
+    if a.pairs <= 0:
+        return result
+    quiet, QUIET_S = QUIET_S, a.pair_quiet
+    log("")
+    log(f"Alternating pairs ({a.pairs} per VTK setting, each side in a fresh process; "
+        "VTK first in odd pairs):")
+    for vt, o in partners(rows):
+        if o is None:
+            continue
+        run, db, render = o["run"]
+        for k in range(a.pairs):
+            sides = ["vtk", "parallax"] if k % 2 == 0 else ["parallax", "vtk"]
+            got = {}
+            for side in sides:
+                if side == "vtk":
+                    got["vtk"] = vtk_time(a, name, vt["step_mm"])
+                else:
+                    img, st = run_parallax(px, f"{run}-pair{k + 1}", base, db, render, out, a.frames, False)
+                    got["parallax"] = st
+                    got["parallax_rmse"] = image_error(img, np.load(out / f"{name}-reference.npy"))[0]
+            t_vtk = statistics.median(got["vtk"]["times"])
+            t_px = got["parallax"]["render_ms"]
+            if got["parallax_rmse"] != o["rmse"]:
+                sys.exit(f"{name}: the partner's image changed between runs "
+                         f"(RMSE {o['rmse']:.6e} → {got['parallax_rmse']:.6e})")
+            result.append(dict(case=name, vtk_step_mm=vt["step_mm"], vtk_rmse=vt["rmse"],
+                               pair_vtk_rmse=got["vtk"]["rmse"], partner=o["config"],
+                               partner_step_mm=o["step_mm"], partner_rmse=o["rmse"], pair=k + 1,
+                               first=sides[0], vtk_ms=t_vtk, parallax_ms=t_px, ratio=t_px / t_vtk))
+            log(f"  VTK {vt['step_mm']:5} mm ↔ {o['config']} {o['step_mm']} mm, pair {k + 1} "
+                f"({sides[0]} first): VTK {t_vtk:7.1f} ms, Parallax {t_px:7.1f} ms, ratio {t_px / t_vtk:.2f}")
+    QUIET_S = quiet
+    return result
+
+
+def pair_lines(pair_rows):
+    """Per VTK setting: the ratio of the medians over its pairs, and the
+    spread of the pairs' own ratios."""
+    lines = []
+    steps = sorted({r["vtk_step_mm"] for r in pair_rows})
+    for s in steps:
+        rs = [r for r in pair_rows if r["vtk_step_mm"] == s]
+        v = statistics.median(r["vtk_ms"] for r in rs)
+        p = statistics.median(r["parallax_ms"] for r in rs)
+        q = [r["ratio"] for r in rs]
+        vts = ", ".join(format(r["vtk_ms"], ".0f") for r in rs)
+        pxs = ", ".join(format(r["parallax_ms"], ".0f") for r in rs)
+        lines.append(f"VTK {s:5} mm ↔ {rs[0]['partner']} {rs[0]['partner_step_mm']} mm: VTK {vts} ms, "
+                     f"Parallax {pxs} ms: ratio of medians {p / v:.2f} (pairs {min(q):.2f}–{max(q):.2f})")
+    return lines
+
+
+# --------------------------------------------------------------------------
 
 def fmt(x, spec):
     return "" if x == "" or x is None else format(x, spec)
@@ -606,6 +714,7 @@ CASES = [
 
 
 def main():
+    global QUIET_S
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--parallax", default=str(ROOT / "target/release/parallax"))
     ap.add_argument("--out", default=str(ROOT / "out/bench-vtk"))
@@ -616,13 +725,27 @@ def main():
     ap.add_argument("--csv", default=str(BENCH / "vtk_results.csv"))
     ap.add_argument("--cases", default=",".join(c["name"] for c in CASES),
                     help="which comparisons (default: all)")
+    ap.add_argument("--pairs", type=int, default=3,
+                    help="alternating pairs per VTK setting and its partner (0: none)")
+    ap.add_argument("--pairs-csv", default=str(BENCH / "vtk_pairs.csv"))
+    ap.add_argument("--vtk-time", nargs=2, metavar=("CASE", "STEP"),
+                    help="(internal) time VTK alone in this process and print the result")
+    ap.add_argument("--quiet", type=float, default=QUIET_S,
+                    help="seconds without other processes' load before each timed section")
+    ap.add_argument("--pair-quiet", type=float, default=3.0,
+                    help="the same before each side of an alternating pair")
     a = ap.parse_args()
+    QUIET_S = a.quiet
+    if a.vtk_time:
+        vtk_time_main(a)
+        return
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     px = Path(a.parallax)
     volumes = {}
     rows = []
+    pair_rows = []
     summary = []
     for case in CASES:
         if case["name"] not in a.cases.split(","):
@@ -632,15 +755,16 @@ def main():
                                        else read_nrrd(out / "ct256.nrrd"))
         log("")
         log(f"==== {case['title']} ({case['name']})")
-        case_rows = run_case(case, a, px, out, volumes[case["volume"]])
+        case_rows, case_pairs = run_case(case, a, px, out, volumes[case["volume"]])
         rows += case_rows
-        summary.append((case, case_rows))
+        pair_rows += case_pairs
+        summary.append((case, case_rows, case_pairs))
 
     # ---- Table.
     cols = ["case", "renderer", "config", "step_mm", "early_termination", "readback", "time_ms",
             "rmse", "max_abs", "psnr_db", "cores", "other_cores"] + STAGES + ["light_frame_render_ms", "bricks", "adequate"]
     with open(a.csv, "w", newline="") as f:
-        wr = csv.DictWriter(f, fieldnames=cols)
+        wr = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
         wr.writeheader()
         for r in rows:
             rr = dict(r)
@@ -655,34 +779,67 @@ def main():
     log("")
     log("Summary: for each VTK setting (ray-cast image on Parallax's domain), the fastest Parallax "
         "setting with early termination matched and an RMSE no larger, as the time ratio Parallax / VTK:")
-    for case, case_rows in summary:
+    for case, case_rows, _ in summary:
         log(f"  {case['title']}:")
         for line in equal_error_pairs(case_rows):
             log("    " + line)
     log(f"\nwrote {a.csv}")
+    if pair_rows:
+        pcols = ["case", "vtk_step_mm", "vtk_rmse", "pair_vtk_rmse", "partner", "partner_step_mm",
+                 "partner_rmse", "pair", "first", "vtk_ms", "parallax_ms", "ratio"]
+        with open(a.pairs_csv, "w", newline="") as f:
+            wr = csv.DictWriter(f, fieldnames=pcols)
+            wr.writeheader()
+            for r in pair_rows:
+                rr = dict(r)
+                for k in ["vtk_rmse", "partner_rmse"]:
+                    rr[k] = f"{rr[k]:.4e}"
+                rr["pair_vtk_rmse"] = fmt(rr["pair_vtk_rmse"], ".4e")
+                for k in ["vtk_ms", "parallax_ms"]:
+                    rr[k] = f"{rr[k]:.1f}"
+                rr["ratio"] = f"{rr['ratio']:.3f}"
+                wr.writerow(rr)
+        log("")
+        log("The same pairs timed again, alternating, each side in a fresh process "
+            f"({a.pairs} pairs per VTK setting; ratio Parallax / VTK):")
+        for case, _, case_pairs in summary:
+            log(f"  {case['title']}:")
+            for line in pair_lines(case_pairs):
+                log("    " + line)
+        log(f"\nwrote {a.pairs_csv}")
 
 
-def equal_error_pairs(rows):
-    lines = []
+def partners(rows):
+    """Each VTK setting (box domain, ray-cast image) with the fastest
+    Parallax setting that has early termination matched and an RMSE no
+    larger (None when there is none)."""
+    out = []
     for vt in rows:
         if not (vt["renderer"] == "vtk" and vt["config"].startswith("box") and vt["readback"].startswith("ray")):
             continue
         ok = [o for o in rows if o["renderer"] == "parallax" and o["early_termination"] < 1
               and o["rmse"] <= vt["rmse"]]
-        if not ok:
+        out.append((vt, min(ok, key=lambda r: r["time_ms"]) if ok else None))
+    return out
+
+
+def equal_error_pairs(rows):
+    lines = []
+    for vt, o in partners(rows):
+        if o is None:
             lines.append(f"VTK {vt['step_mm']:5} mm (RMSE {vt['rmse']:.2e}, {vt['time_ms']:6.1f} ms): "
                          "no Parallax setting as accurate")
             continue
-        o = min(ok, key=lambda r: r["time_ms"])
         lines.append(f"VTK {vt['step_mm']:5} mm (RMSE {vt['rmse']:.2e}, {vt['time_ms']:6.1f} ms) ↔ Parallax "
                      f"{o['config']} {o['step_mm']} mm (RMSE {o['rmse']:.2e}, {o['time_ms']:6.1f} ms): "
                      f"ratio {o['time_ms'] / vt['time_ms']:.2f}")
     return lines
 
 
-def parallax_row(case, config, step, et, st, rmse, mx, psnr):
-    """One Parallax run's row of the table."""
-    return dict(case=case, renderer="parallax", config=config,
+def parallax_row(case, config, step, et, st, rmse, mx, psnr, run=None):
+    """One Parallax run's row of the table; `run`: (name, database, render
+    settings), what the alternating pairs need to run it again."""
+    return dict(case=case, renderer="parallax", config=config, run=run,
                 step_mm=step, early_termination=round(et, 5), readback="float32",
                 time_ms=st["render_ms"], rmse=rmse, max_abs=mx, psnr_db=psnr,
                 cores=st["cores"], other_cores=st["other_cores"],
@@ -733,19 +890,19 @@ def run_case(case, a, px, out, volume):
                                        dict(step_factor=s, early_termination=et), out, a.frames, a.reuse)
                 rmse, mx, psnr = image_error(img, ref)
                 ours[f"ours-{bricks}-step{s}-et{et_name}"] = img
-                rows.append(parallax_row(name, f"{bricks} bricks", s, et, st, rmse, mx, psnr))
+                rows.append(parallax_row(name, f"{bricks} bricks", s, et, st, rmse, mx, psnr,
+                                         (run, dbs[bricks], dict(step_factor=s, early_termination=et))))
 
     bricks = "full" if case["full"] else "8-bit"
     for db, label, steps in [(bricks, f"{bricks} bricks", TABLE_STEPS),
                              (f"{bricks}-b64", f"{bricks} bricks of 64", BIG_BRICK_STEPS)]:
         for s in steps:
             run = f"{name}-ours-{db}-2d-step{s}-etvtk"
-            img, st = run_parallax(px, run, base, dbs[db],
-                                   dict(step_factor=s, early_termination=VTK_EARLY_TERMINATION,
-                                        preintegration="2d"), out, a.frames, a.reuse)
+            render = dict(step_factor=s, early_termination=VTK_EARLY_TERMINATION, preintegration="2d")
+            img, st = run_parallax(px, run, base, dbs[db], render, out, a.frames, a.reuse)
             rmse, mx, psnr = image_error(img, ref)
             rows.append(parallax_row(name, f"{label}, 2D table", s, VTK_EARLY_TERMINATION, st,
-                                     rmse, mx, psnr))
+                                     rmse, mx, psnr, (run, dbs[db], render)))
 
     # ---- VTK, on Parallax's domain (padded + cropped) and as it comes.
     log("VTK vtkFixedPointVolumeRayCastMapper:")
@@ -853,7 +1010,7 @@ def run_case(case, a, px, out, volume):
         "brick is resident: an upper bound of the fixed per-frame cost of dispatch and image/feedback readback)")
     log(f"\nwrote {out / (name + '-compare.png')} (reference | VTK 0.5 mm | Parallax 8-bit 0.5 mm; "
         f"below: 10×|error|)")
-    return rows
+    return rows, confirm_pairs(case, rows, a, px, out, base)
 
 
 if __name__ == "__main__":
