@@ -133,39 +133,64 @@ fn bad_input_gets_a_clear_error_and_keeps_existing_output() {
     assert_eq!(std::fs::read(&out).unwrap(), b"earlier result");
 }
 
+/// Writes each (path under `dir`, text).
+fn write_all(dir: &Path, files: &[(&str, &str)]) {
+    for (name, text) in files {
+        write(dir.join(name), text);
+    }
+}
+
 fn write(p: PathBuf, text: &str) -> PathBuf {
     std::fs::create_dir_all(p.parent().unwrap()).unwrap();
     std::fs::write(&p, text).unwrap();
     p
 }
 
+/// `dir/ml.pxo`: a Marschner–Lobb volume of `size`³ in bricks of 16.
+fn marschner_lobb_database(dir: &Path, size: u32) {
+    let vol = dir.join("ml.nrrd");
+    let size = size.to_string();
+    ok(&["synth", "marschner-lobb", "--size", &size, "-o", s(&vol)]);
+    ok(&[
+        "import",
+        s(&vol),
+        "-o",
+        s(&dir.join("ml.pxo")),
+        "--brick",
+        "16",
+    ]);
+}
+
 #[test]
 fn render_writes_images_floats_and_stats() {
     let d = tempfile::tempdir().unwrap();
-    let vol = d.path().join("ml.nrrd");
-    ok(&["synth", "marschner-lobb", "--size", "40", "-o", s(&vol)]);
-    let db = d.path().join("ml.pxo");
-    ok(&["import", s(&vol), "-o", s(&db), "--brick", "16"]);
-    write(
-        d.path().join("tf.toml"),
-        "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 128\ncolor = [1, 0.5, 0.2]\nextinction = 0.05\n[[point]]\nvalue = 255\ncolor = [1, 1, 1]\nextinction = 0.2\n",
+    marschner_lobb_database(d.path(), 40);
+    write_all(
+        d.path(),
+        &[
+            (
+                "tf.toml",
+                "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 128\ncolor = [1, 0.5, 0.2]\nextinction = 0.05\n[[point]]\nvalue = 255\ncolor = [1, 1, 1]\nextinction = 0.2\n",
+            ),
+            (
+                "display.toml",
+                "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.005\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
+            ),
+            (
+                "p/left.toml",
+                "id = \"left\"\nposition = [-0.05, 0, 0.8]\nresolution = [32, 24]\n",
+            ),
+            (
+                "p/right.toml",
+                "id = \"right\"\nposition = [0.05, 0, 0.8]\nresolution = [40, 30]\n",
+            ),
+            (
+                "scene.toml",
+                "volume = \"ml.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\nrotation_deg = [10, 20, 0]\n[render]\nshading = \"phong\"\n",
+            ),
+        ],
     );
-    write(
-        d.path().join("display.toml"),
-        "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.005\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
-    );
-    write(
-        d.path().join("p/left.toml"),
-        "id = \"left\"\nposition = [-0.05, 0, 0.8]\nresolution = [32, 24]\n",
-    );
-    write(
-        d.path().join("p/right.toml"),
-        "id = \"right\"\nposition = [0.05, 0, 0.8]\nresolution = [40, 30]\n",
-    );
-    let scene = write(
-        d.path().join("scene.toml"),
-        "volume = \"ml.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\nrotation_deg = [10, 20, 0]\n[render]\nshading = \"phong\"\n",
-    );
+    let scene = d.path().join("scene.toml");
     let out = d.path().join("out");
     let text = ok(&[
         "render",
@@ -483,4 +508,86 @@ fn a_projector_names_its_adapter() {
         "--out",
         s(&d.path().join("o2")),
     ]);
+}
+
+/// The developer hooks of backend/src/raycast/shader.rs that
+/// `bench/kernel_variants.py` stands on: `PARALLAX_KERNEL_DUMP` writes the
+/// composed kernel, `PARALLAX_KERNEL_SOURCE` makes the renderer use another
+/// source (here one that writes a constant colour), and a source that
+/// cannot be read is an error naming the variable and the file.
+#[test]
+fn kernel_hooks_dump_and_replace_the_kernel() {
+    let d = tempfile::tempdir().unwrap();
+    marschner_lobb_database(d.path(), 24);
+    write_all(
+        d.path(),
+        &[
+            (
+                "tf.toml",
+                "[[point]]\nvalue = 0\ncolor = [1, 1, 1]\nextinction = 0.1\n[[point]]\nvalue = 255\ncolor = [1, 1, 1]\nextinction = 0.1\n",
+            ),
+            (
+                "display.toml",
+                "[screen]\nsize = [0.3, 0.2]\npixel_size = 0.005\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
+            ),
+            (
+                "p/window.toml",
+                "id = \"window\"\nposition = [0, 0, 0.8]\nresolution = [24, 16]\n",
+            ),
+            (
+                "scene.toml",
+                "volume = \"ml.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\nrotation_deg = [0, 0, 0]\n",
+            ),
+        ],
+    );
+    let scene = d.path().join("scene.toml");
+    let render = |name: &str, env: &[(&str, &Path)]| {
+        let out = d.path().join(name);
+        let o = Command::new(env!("CARGO_BIN_EXE_parallax"))
+            .args(["render", "--scene", s(&scene), "--frames", "3", "--float"])
+            .args(["--sync", "--out", s(&out)])
+            .envs(env.iter().map(|(k, v)| (k, v.as_os_str())))
+            .output()
+            .unwrap();
+        (o, out.join("frame_00002/window.npy"))
+    };
+    let dumped = d.path().join("kernel.wgsl");
+    let (o, npy) = render("plain", &[("PARALLAX_KERNEL_DUMP", &dumped)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let src = std::fs::read_to_string(&dumped).unwrap();
+    let write_pixel = "image[out] = vec4<f32>(acc.color, acc.alpha);";
+    assert_eq!(
+        src.matches(write_pixel).count(),
+        1,
+        "the dump is the kernel"
+    );
+    let (_, _, plain) = parallax_backend::output::read_npy(&npy).unwrap();
+    let constant = [0.25f32, 0.5, 0.75, 1.0];
+    assert!(!plain.contains(&constant));
+
+    let changed = write(
+        d.path().join("changed.wgsl"),
+        &src.replace(write_pixel, "image[out] = vec4<f32>(0.25, 0.5, 0.75, 1.0);"),
+    );
+    let (o, npy) = render("changed", &[("PARALLAX_KERNEL_SOURCE", &changed)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (_, _, px) = parallax_backend::output::read_npy(&npy).unwrap();
+    // Rays of the tiles that meet the volume write the constant; the
+    // others are left at zero.
+    assert!(px.iter().all(|p| *p == constant || *p == [0.0; 4]));
+    let hits = px.iter().filter(|p| **p == constant).count();
+    let seen = plain.iter().filter(|p| p[3] > 0.0).count();
+    assert!(
+        hits >= seen && seen > 0,
+        "{hits} constant pixels, {seen} seen"
+    );
+
+    let missing = d.path().join("no-such-kernel.wgsl");
+    let (o, _) = render("missing", &[("PARALLAX_KERNEL_SOURCE", &missing)]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("PARALLAX_KERNEL_SOURCE") && e.contains("no-such-kernel.wgsl"),
+        "{e}"
+    );
 }

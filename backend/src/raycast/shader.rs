@@ -13,9 +13,10 @@
 //! combination a scene can ask for with naga, without a GPU, and checks the
 //! Rust mirrors of GPU structs against naga's layout.
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use parallax_common::tools::{EnhancerKind, MAX_ENHANCERS};
 use std::fmt::Write;
+use std::path::Path;
 
 /// The importable modules, by name.
 pub const MODULES: &[(&str, &str)] = &[
@@ -264,9 +265,32 @@ fn expand<'a>(
 }
 
 /// The composed source of a kernel combination.
+///
+/// Two developer hooks for kernel experiments (`bench/kernel_variants.py`
+/// times hand-made variants of a kernel with them): with
+/// `PARALLAX_KERNEL_DUMP=<path>` the composed source is written there,
+/// and with `PARALLAX_KERNEL_SOURCE=<path>` every kernel the process makes
+/// is that file's source instead of its own composition.
 pub fn kernel(key: &KernelKey) -> Result<String> {
     let chain = key.chain_module()?;
-    compose("raycast.wgsl", KERNEL, &[("chain", &chain)])
+    let src = compose("raycast.wgsl", KERNEL, &[("chain", &chain)])?;
+    if let Some(path) = std::env::var_os("PARALLAX_KERNEL_DUMP") {
+        std::fs::write(&path, &src).with_context(|| {
+            format!(
+                "PARALLAX_KERNEL_DUMP: writing {}",
+                Path::new(&path).display()
+            )
+        })?;
+    }
+    if let Some(path) = std::env::var_os("PARALLAX_KERNEL_SOURCE") {
+        return std::fs::read_to_string(&path).with_context(|| {
+            format!(
+                "PARALLAX_KERNEL_SOURCE: reading {}",
+                Path::new(&path).display()
+            )
+        });
+    }
+    Ok(src)
 }
 
 #[cfg(test)]

@@ -1,0 +1,204 @@
+#!/usr/bin/env python3
+"""Where a coarse sample of the translucent brain goes, and what cheaper
+samples would buy: times variants of the ray-casting kernel, each made from
+the kernel the view really uses by one textual change, beside VTK's
+vtkFixedPointVolumeRayCastMapper, in alternating rounds of fresh processes.
+
+    python3 bench/kernel_variants.py [--rounds 3] [--csv bench/kernel_variants.csv]
+
+Needs what `bash bench/vtk_compare.sh` leaves in out/bench-vtk (the Colin27
+databases, the brain's reference render) and a release build; imports the
+database with bricks of 128 itself. The view, the transfer function and
+the reference are bench/vtk_compare.py's (512×512, Colin27 translucent
+brain, full-precision bricks, the 2D pre-integration table, early
+termination matched to VTK's).
+
+The kernel is dumped with PARALLAX_KERNEL_DUMP from a render of the base
+scene, each variant written beside it and loaded with
+PARALLAX_KERNEL_SOURCE (backend/src/raycast/shader.rs). Variants marked
+"cost only" compute a wrong image on purpose: they take a part of the
+sample's work away (the brick pool's filtered fetch, the table's, every
+sample after a leaf's first) to measure what that part costs. The others
+are whole renderers whose RMSE against the reference counts.
+
+Each round runs every variant once, Parallax by `parallax render --sync`
+(16 frames, the median render_ms of the last 8) and VTK by
+`bench/vtk_compare.py --vtk-time` (one set-up, a warm-up and five timed
+renders, the median), each in a fresh process after a few quiet seconds;
+the table gives the median over the rounds.
+"""
+import argparse
+import csv
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import vtk_compare as vc  # noqa: E402
+
+ROOT = vc.ROOT
+CASE = "colin27-brain"
+
+# The pool's filtered fetch, the 2D table's, and the loop that ends a
+# leaf's samples, as the composed kernel spells them.
+POOL_FETCH = ("        return textureSampleLevel(pool, pool_sampler, "
+              "(vec3<f32>(o) + local + 0.5) * frame.recip.xyz, 0.0).r;")
+TABLE_FETCH = ("    return max(textureSampleLevel(preint_grid, grid_sampler, "
+               "(g + 0.5) * frame.grid.z, 0.0),")
+LEAF_LOOP = ("            // An all-empty leaf ends with its starting sample, at its exit.\n"
+             "            if (tc >= t_exit) {")
+
+# A value of the position that costs a few operations and no fetch.
+CHEAP_VALUE = "90.0 + 0.5 * local.x + 0.3 * local.y + 0.2 * local.z + f32(o.x)"
+
+POOL_FROM_STORAGE = f"""        let f0 = floor(local);
+        let w = local - f0;
+        let i0 = vec3<u32>(vec3<i32>(f0) + o);
+        let row = frame.pool.x * frame.pool.w;
+        let slice = row * frame.pool.y * frame.pool.w;
+        let b = i0.x + row * i0.y + slice * i0.z;
+        let m = (1u << firstLeadingBit(arrayLength(&image))) - 1u;
+        let c00 = mix(image[b & m].x, image[(b + 1u) & m].x, w.x);
+        let c10 = mix(image[(b + row) & m].x, image[(b + row + 1u) & m].x, w.x);
+        let c01 = mix(image[(b + slice) & m].x, image[(b + slice + 1u) & m].x, w.x);
+        let c11 = mix(image[(b + slice + row) & m].x, image[(b + slice + row + 1u) & m].x, w.x);
+        let v = mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+        return {CHEAP_VALUE} + 1e-30 * v;"""
+
+# name: (database, step in voxels, replacements, whether the image counts, what it is)
+VARIANTS = {
+    "base": ("full-b64", 5.0, [], True,
+             "bricks of 64, 5 mm: the partner of VTK at 4 mm"),
+    "bricks-128": ("full-b128", 5.0, [], True, "bricks of 128, 5 mm"),
+    "table-nearest": ("full-b64", 5.0,
+                      [(TABLE_FETCH, "    return max(textureLoad(preint_grid, vec2<i32>(g + 0.5), 0),")],
+                      True, "the 2D table's nearest node (one textureLoad) instead of its bilinear fetch"),
+    "pool-nearest": ("full-b64", 5.0,
+                     [(POOL_FETCH, "        return textureLoad(pool, o + vec3<i32>(local + 0.5), 0).r;")],
+                     True, "the nearest voxel (one textureLoad) instead of the trilinear filter"),
+    "trilinear-3mm": ("full-b64", 3.0, [], True, "bricks of 64, 3 mm: the partner of VTK at 2 mm"),
+    "no-pool-fetch": ("full-b64", 5.0, [(POOL_FETCH, f"        return {CHEAP_VALUE};")], False,
+                      "cost only: a few operations instead of the pool's filtered fetch"),
+    "pool-from-storage": ("full-b64", 5.0, [(POOL_FETCH, POOL_FROM_STORAGE)], False,
+                          "cost only: eight reads of a storage buffer (the image's, 4 MB, its offsets "
+                          "the pool's wrapped) and the trilinear weights, instead of the texture unit"),
+    "no-fetches": ("full-b64", 5.0,
+                   [(POOL_FETCH, f"        return {CHEAP_VALUE};"),
+                    (TABLE_FETCH, "    return max(vec4<f32>(g.x * 1e-4, g.y * 1e-3, 0.5, 0.4),")],
+                   False, "cost only: neither fetch (the table's values made up)"),
+    "no-samples": ("full-b64", 5.0,
+                   [(LEAF_LOOP, LEAF_LOOP.replace("if (tc >= t_exit) {", "if (tc >= t_exit || true) {"))],
+                   False, "cost only: rays, traversal and each leaf's first sample, no others"),
+}
+VTK_STEPS = [4.0, 2.0]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--parallax", default=str(ROOT / "target/release/parallax"))
+    ap.add_argument("--out", default=str(ROOT / "out/bench-vtk"))
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--frames", type=int, default=16)
+    ap.add_argument("--quiet", type=float, default=3.0, help="seconds of quiet before each timed run")
+    ap.add_argument("--csv", default=str(vc.BENCH / "kernel_variants.csv"))
+    a = ap.parse_args()
+    vc.QUIET_S = a.quiet
+    out = Path(a.out).resolve()
+    px = str(Path(a.parallax).resolve())
+    ref_path = out / "runs" / f"{CASE}-reference"
+    dbs = {k: out / f"colin27-{k}.pxo" for k in ["full-b64", "full-b128"]}
+    if not dbs["full-b64"].exists() or not ref_path.exists():
+        sys.exit(f"{dbs['full-b64']} or {ref_path} missing: run bash bench/vtk_compare.sh first")
+    if not dbs["full-b128"].exists():
+        subprocess.run([px, "import", str(vc.VOLUME), "-o", str(dbs["full-b128"]), "--quantize", "none",
+                        "--brick", "128"], check=True, capture_output=True)
+    case = next(c for c in vc.CASES if c["name"] == CASE)
+    base = tomllib.loads((vc.BENCH / "vtk_scene.toml").read_text())
+    base["transfer_function"] = case["tf"]
+    ref_render = dict(step_factor=0.0625, interpolation="exact", accuracy=0.01, early_termination=1.0,
+                      visibility_feedback=False, cpu_cache_mb=2048, gpu_cache_mb=1024, upload_budget=100000)
+    ref, _ = vc.run_parallax(px, f"{CASE}-reference", base, (out / "colin27-full.pxo").resolve(),
+                             ref_render, out, 8, True, timed=False)
+    np_ref = out / f"{CASE}-reference.npy"
+    if not np_ref.exists():
+        vc.np.save(np_ref, ref)
+
+    def render(step):
+        return dict(step_factor=step, early_termination=vc.VTK_EARLY_TERMINATION, preintegration="2d")
+
+    # The kernel the base scene uses, and the variants made from it.
+    kdir = out / "kernel-variants"
+    kdir.mkdir(parents=True, exist_ok=True)
+    dumped = kdir / "base.wgsl"
+    env = dict(os.environ, PARALLAX_KERNEL_DUMP=str(dumped))
+    vc.write_scene(kdir / "dump.toml", base, dbs["full-b64"], render(5.0))
+    p = subprocess.run([px, "render", "--scene", str(kdir / "dump.toml"), "--frames", "1", "--out",
+                        str(kdir / "dump")], env=env, capture_output=True, text=True)
+    if p.returncode != 0:
+        sys.exit(f"dumping the kernel failed:\n{p.stdout}\n{p.stderr}")
+    src = dumped.read_text()
+    sources = {}
+    for name, (_, _, changes, _, _) in VARIANTS.items():
+        if not changes:
+            continue
+        text = src
+        for old, new in changes:
+            if text.count(old) != 1:
+                sys.exit(f"{name}: the kernel has {text.count(old)} copies of {old!r}, not one: "
+                         "update bench/kernel_variants.py to the kernel's source")
+            text = text.replace(old, new)
+        sources[name] = kdir / f"{name}.wgsl"
+        sources[name].write_text(text)
+
+    times = {k: [] for k in list(VARIANTS) + [f"vtk-{s:g}mm" for s in VTK_STEPS]}
+    errors = {}
+    for r in range(1, a.rounds + 1):
+        vc.log(f"round {r} of {a.rounds}")
+        for s in VTK_STEPS:
+            vc.wait_idle()
+            p = subprocess.run([sys.executable, str(vc.BENCH / "vtk_compare.py"), "--vtk-time", CASE, str(s),
+                                "--out", str(out)], capture_output=True, text=True)
+            line = next((ln for ln in p.stdout.splitlines() if ln.startswith("VTKTIME ")), None)
+            if p.returncode != 0 or line is None:
+                sys.exit(f"VTK at {s} mm failed:\n{p.stdout}\n{p.stderr}")
+            d = json.loads(line[len("VTKTIME "):])
+            times[f"vtk-{s:g}mm"].append(statistics.median(d["times"]))
+            errors[f"vtk-{s:g}mm"] = d["rmse"]
+        for name, (db, step, _, counts, _) in VARIANTS.items():
+            if name in sources:
+                os.environ["PARALLAX_KERNEL_SOURCE"] = str(sources[name])
+            else:
+                os.environ.pop("PARALLAX_KERNEL_SOURCE", None)
+            img, st = vc.run_parallax(px, f"kv-{name}", base, dbs[db], render(step), out, a.frames, False)
+            os.environ.pop("PARALLAX_KERNEL_SOURCE", None)
+            times[name].append(st["render_ms"])
+            errors[name] = vc.image_error(img, ref)[0]
+
+    med = {k: statistics.median(v) for k, v in times.items()}
+    rows = []
+    for k in times:
+        what = VARIANTS[k][4] if k in VARIANTS else f"VTK at {k[4:-2]} mm"
+        counts = VARIANTS[k][3] if k in VARIANTS else True
+        rows.append(dict(variant=k, what=what, rmse=f"{errors[k]:.4e}" if counts else "",
+                         render_ms=round(med[k], 2), runs_ms=" ".join(f"{t:.1f}" for t in times[k]),
+                         ratio_to_base=round(med[k] / med["base"], 3)))
+    with open(a.csv, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    vc.log(f"\n{'variant':18s} {'RMSE':>10s} {'ms':>7s} {'/ base':>7s}  (runs, ms)")
+    for row in rows:
+        vc.log(f"{row['variant']:18s} {row['rmse'] or 'cost only':>10s} {row['render_ms']:7.1f} "
+               f"{row['ratio_to_base']:7.3f}  ({row['runs_ms']})")
+    vc.log(f"\nParallax / VTK at equal or lower error: base / VTK 4 mm {med['base'] / med['vtk-4mm']:.2f}, "
+           f"pool-nearest / VTK 4 mm {med['pool-nearest'] / med['vtk-4mm']:.2f}, "
+           f"trilinear-3mm / VTK 2 mm {med['trilinear-3mm'] / med['vtk-2mm']:.2f}")
+    vc.log(f"written: {a.csv}")
+
+
+if __name__ == "__main__":
+    main()
