@@ -34,7 +34,6 @@ import os
 import statistics
 import subprocess
 import sys
-import tomllib
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -109,23 +108,15 @@ def main():
     vc.QUIET_S = a.quiet
     out = Path(a.out).resolve()
     px = str(Path(a.parallax).resolve())
-    ref_path = out / "runs" / f"{CASE}-reference"
+    ref_path = out / f"{CASE}-reference.npy"
     dbs = {k: out / f"colin27-{k}.pxo" for k in ["full-b64", "full-b128"]}
     if not dbs["full-b64"].exists() or not ref_path.exists():
         sys.exit(f"{dbs['full-b64']} or {ref_path} missing: run bash bench/vtk_compare.sh first")
     if not dbs["full-b128"].exists():
         subprocess.run([px, "import", str(vc.VOLUME), "-o", str(dbs["full-b128"]), "--quantize", "none",
                         "--brick", "128"], check=True, capture_output=True)
-    case = next(c for c in vc.CASES if c["name"] == CASE)
-    base = tomllib.loads((vc.BENCH / "vtk_scene.toml").read_text())
-    base["transfer_function"] = case["tf"]
-    ref_render = dict(step_factor=0.0625, interpolation="exact", accuracy=0.01, early_termination=1.0,
-                      visibility_feedback=False, cpu_cache_mb=2048, gpu_cache_mb=1024, upload_budget=100000)
-    ref, _ = vc.run_parallax(px, f"{CASE}-reference", base, (out / "colin27-full.pxo").resolve(),
-                             ref_render, out, 8, True, timed=False)
-    np_ref = out / f"{CASE}-reference.npy"
-    if not np_ref.exists():
-        vc.np.save(np_ref, ref)
+    base = vc.case_scene(next(c for c in vc.CASES if c["name"] == CASE))
+    ref = vc.np.load(ref_path)
 
     def render(step):
         return dict(step_factor=step, early_termination=vc.VTK_EARLY_TERMINATION, preintegration="2d")

@@ -848,6 +848,13 @@ def parallax_row(case, config, step, et, st, rmse, mx, psnr, run=None):
                 **{k: st[k] for k in STAGES})
 
 
+def case_scene(case):
+    """bench/vtk_scene.toml with the case's transfer function."""
+    base = tomllib.loads((BENCH / "vtk_scene.toml").read_text())
+    base["transfer_function"] = case["tf"]
+    return base
+
+
 def run_case(case, a, px, out, volume):
     name = case["name"]
     stem = "colin27" if case["volume"] == "colin27" else "ct256"
@@ -858,8 +865,7 @@ def run_case(case, a, px, out, volume):
         if not p.exists():
             sys.exit(f"{p} missing: run bench/vtk_compare.sh (it imports the databases)")
 
-    base = tomllib.loads((BENCH / "vtk_scene.toml").read_text())
-    base["transfer_function"] = case["tf"]
+    base = case_scene(case)
     tf = load_tf((BENCH / base["transfer_function"]).resolve())
     pl = base["placement"]
     dims, spacing = volume[1], volume[2]
