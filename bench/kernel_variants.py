@@ -51,6 +51,11 @@ TABLE_FETCH = ("    return max(textureSampleLevel(preint_grid, grid_sampler, "
 LEAF_LOOP = ("            // An all-empty leaf ends with its starting sample, at its exit.\n"
              "            if (tc >= t_exit) {")
 
+# The sample loop without its lookahead (each pass fetching its own sample,
+# not the next pass's): the kernel's LOOKAHEAD made false where it is read.
+PLAIN_LOOP = [("if (LOOKAHEAD && tc < t_exit) {", "if (false && tc < t_exit) {"),
+              ("            if (LOOKAHEAD) {\n", "            if (false) {\n")]
+
 # A value of the position that costs a few operations and no fetch.
 CHEAP_VALUE = "90.0 + 0.5 * local.x + 0.3 * local.y + 0.2 * local.z + f32(o.x)"
 
@@ -73,6 +78,8 @@ VARIANTS = {
     "base": ("full-b64", 5.0, [], True,
              "bricks of 64, 5 mm: the partner of VTK at 4 mm"),
     "bricks-128": ("full-b128", 5.0, [], True, "bricks of 128, 5 mm"),
+    "plain-loop": ("full-b64", 5.0, PLAIN_LOOP, True,
+                   "each pass fetching its own sample (no LOOKAHEAD)"),
     "table-nearest": ("full-b64", 5.0,
                       [(TABLE_FETCH, "    return max(textureLoad(preint_grid, vec2<i32>(g + 0.5), 0),")],
                       True, "the 2D table's nearest node (one textureLoad) instead of its bilinear fetch"),
@@ -96,18 +103,49 @@ VARIANTS = {
 VTK_STEPS = [4.0, 2.0]
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def dump_kernel(px, kdir, base, db, render):
+    """The composed kernel a scene's render uses (PARALLAX_KERNEL_DUMP)."""
+    kdir.mkdir(parents=True, exist_ok=True)
+    dumped = kdir / "base.wgsl"
+    env = dict(os.environ, PARALLAX_KERNEL_DUMP=str(dumped))
+    vc.write_scene(kdir / "dump.toml", base, db, render)
+    p = subprocess.run([px, "render", "--scene", str(kdir / "dump.toml"), "--frames", "1", "--out",
+                        str(kdir / "dump")], env=env, capture_output=True, text=True)
+    if p.returncode != 0:
+        sys.exit(f"dumping the kernel failed:\n{p.stdout}\n{p.stderr}")
+    return dumped.read_text()
+
+
+def write_variant(kdir, name, src, changes):
+    """`src` with each (old, new) replacement made once; the file written."""
+    text = src
+    for old, new in changes:
+        if text.count(old) != 1:
+            sys.exit(f"{name}: the kernel has {text.count(old)} copies of {old!r}, not one: "
+                     "update bench/kernel_variants.py to the kernel's source")
+        text = text.replace(old, new)
+    path = kdir / f"{name}.wgsl"
+    path.write_text(text)
+    return path
+
+
+def rounds_arguments(doc, csv_name):
+    """The options of a script timing rounds of Parallax runs: the
+    arguments, the output folder and the binary."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--parallax", default=str(ROOT / "target/release/parallax"))
     ap.add_argument("--out", default=str(ROOT / "out/bench-vtk"))
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--frames", type=int, default=16)
     ap.add_argument("--quiet", type=float, default=3.0, help="seconds of quiet before each timed run")
-    ap.add_argument("--csv", default=str(vc.BENCH / "kernel_variants.csv"))
+    ap.add_argument("--csv", default=str(vc.BENCH / csv_name))
     a = ap.parse_args()
     vc.QUIET_S = a.quiet
-    out = Path(a.out).resolve()
-    px = str(Path(a.parallax).resolve())
+    return a, Path(a.out).resolve(), str(Path(a.parallax).resolve())
+
+
+def main():
+    a, out, px = rounds_arguments(__doc__, "kernel_variants.csv")
     ref_path = out / f"{CASE}-reference.npy"
     dbs = {k: out / f"colin27-{k}.pxo" for k in ["full-b64", "full-b128"]}
     if not dbs["full-b64"].exists() or not ref_path.exists():
@@ -123,27 +161,11 @@ def main():
 
     # The kernel the base scene uses, and the variants made from it.
     kdir = out / "kernel-variants"
-    kdir.mkdir(parents=True, exist_ok=True)
-    dumped = kdir / "base.wgsl"
-    env = dict(os.environ, PARALLAX_KERNEL_DUMP=str(dumped))
-    vc.write_scene(kdir / "dump.toml", base, dbs["full-b64"], render(5.0))
-    p = subprocess.run([px, "render", "--scene", str(kdir / "dump.toml"), "--frames", "1", "--out",
-                        str(kdir / "dump")], env=env, capture_output=True, text=True)
-    if p.returncode != 0:
-        sys.exit(f"dumping the kernel failed:\n{p.stdout}\n{p.stderr}")
-    src = dumped.read_text()
+    src = dump_kernel(px, kdir, base, dbs["full-b64"], render(5.0))
     sources = {}
     for name, (_, _, changes, _, _) in VARIANTS.items():
-        if not changes:
-            continue
-        text = src
-        for old, new in changes:
-            if text.count(old) != 1:
-                sys.exit(f"{name}: the kernel has {text.count(old)} copies of {old!r}, not one: "
-                         "update bench/kernel_variants.py to the kernel's source")
-            text = text.replace(old, new)
-        sources[name] = kdir / f"{name}.wgsl"
-        sources[name].write_text(text)
+        if changes:
+            sources[name] = write_variant(kdir, name, src, changes)
 
     times = {k: [] for k in list(VARIANTS) + [f"vtk-{s:g}mm" for s in VTK_STEPS]}
     errors = {}

@@ -72,6 +72,9 @@ pub struct Renderer {
     /// Run only the tiles whose rays can meet data (on unless a test
     /// compares against every tile).
     pub tile_culling: bool,
+    /// Fetch samples one pass ahead on float pools with the 2D table (on
+    /// unless a test compares against the plain loop).
+    pub lookahead: bool,
 }
 
 /// A rendered frame: one premultiplied RGBA image per view, and its figures.
@@ -172,6 +175,7 @@ impl Renderer {
             cells_stale: false,
             count_samples: false,
             tile_culling: true,
+            lookahead: true,
         })
     }
 
@@ -329,6 +333,7 @@ impl Renderer {
             macrocells: cfg.macrocells,
             count_samples: self.count_samples,
             tile_culling: self.tile_culling,
+            lookahead: self.lookahead,
             adaptive_step: cfg.adaptive_step,
             multilevel: cfg.multilevel.then(|| Multilevel {
                 accuracy: cfg.accuracy as f32,

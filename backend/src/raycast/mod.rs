@@ -290,6 +290,10 @@ pub struct RenderSettings {
     /// Run only the 8×8 tiles whose rays can meet data (`tiles`); off,
     /// every tile of every view.
     pub tile_culling: bool,
+    /// Fetch each sample one pass of the sample loop ahead (the kernel's
+    /// LOOKAHEAD), on pools of float voxels read with the 2D table; the
+    /// image is the same bit for bit, off only to show that.
+    pub lookahead: bool,
 }
 
 /// What multilevel sampling needs to know of refinement: the same footprint
@@ -323,6 +327,7 @@ impl Default for RenderSettings {
             tricubic: false,
             preint_2d: false,
             tile_culling: true,
+            lookahead: true,
         }
     }
 }
@@ -374,7 +379,7 @@ pub struct Raycaster {
     /// One pipeline per combination of stepper, enhancers and shading that
     /// a frame has used (G10 §5: a kernel specialised for what the scene
     /// uses), built when first needed.
-    pipelines: HashMap<(KernelKey, [bool; 8]), wgpu::ComputePipeline>,
+    pipelines: HashMap<(KernelKey, [bool; 9]), wgpu::ComputePipeline>,
     /// The pool holds f32 values (else 8-bit codes).
     float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
@@ -743,9 +748,9 @@ impl Raycaster {
         &mut self,
         gpu: &Gpu,
         kernel: &KernelKey,
-        flags: [bool; 8],
+        flags: [bool; 9],
     ) -> Result<&wgpu::ComputePipeline> {
-        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint, grid_preint] =
+        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint, grid_preint, lookahead] =
             flags;
         let key = (kernel.clone(), flags);
         if !self.pipelines.contains_key(&key) {
@@ -769,6 +774,10 @@ impl Raycaster {
                 ("TRICUBIC", flag(tricubic)),
                 ("END_PREINT", flag(end_preint)),
                 ("GRID_PREINT", flag(grid_preint)),
+                // Sample values fetched one pass ahead (the kernel's
+                // LOOKAHEAD): set for float pools read with the 2D table,
+                // where the table's fetch hides the pool's.
+                ("LOOKAHEAD", flag(lookahead)),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
                 (
@@ -998,6 +1007,7 @@ impl Raycaster {
                     settings.tricubic,
                     tf.end_path && !grid,
                     grid,
+                    settings.lookahead && self.float_pool && grid,
                 ],
             )?
             .clone();

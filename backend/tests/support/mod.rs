@@ -129,3 +129,120 @@ pub fn colin_placement() -> parallax_common::camera::Placement {
         size: 0.25,
     }
 }
+
+/// A scene a renderer switch must not change.
+pub struct Case<'a> {
+    pub what: &'a str,
+    pub db: &'a Path,
+    pub tf: &'a TransferFunction,
+    pub tools: &'a [parallax_common::tools::Tool],
+    pub placement: parallax_common::camera::Placement,
+    pub views: &'a [parallax_common::camera::View],
+    pub cfg: RenderConfig,
+}
+
+/// Renders the converged frame of `c` (with frame reconstruction, the four
+/// sub-frames of the converged cut) with a switch on and off (`set`);
+/// asserts that the volume is visible and that every view's image is the
+/// same bit for bit. Returns the two frames' figures (on, off) and the
+/// lit pixels out of all.
+pub fn unchanged_by(
+    c: &Case,
+    switch: &str,
+    set: impl Fn(&mut parallax_backend::render::Renderer, bool),
+) -> (
+    parallax_common::protocol::FrameStats,
+    parallax_common::protocol::FrameStats,
+    usize,
+    usize,
+) {
+    let run = |on: bool| {
+        let mut r = parallax_backend::render::Renderer::new(c.db, &c.cfg).unwrap();
+        r.set_transfer_function(1, c.tf).unwrap();
+        r.set_tools(1, c.tools).unwrap();
+        set(&mut r, on);
+        let mut f = r.converge(&c.placement, c.views, &c.cfg, 64).unwrap();
+        if c.cfg.reconstruction {
+            for k in 0..4 {
+                f = r.frame(100 + k, &c.placement, c.views, &c.cfg).unwrap();
+            }
+        }
+        f
+    };
+    let (on, off) = (run(true), run(false));
+    let pixels: usize = on.images.iter().map(Vec::len).sum();
+    let lit: usize = on
+        .images
+        .iter()
+        .map(|img| img.iter().filter(|p| p[3] > 0.01).count())
+        .sum();
+    assert!(lit > pixels / 20, "{}: the volume is visible", c.what);
+    for (a, b) in on.images.iter().zip(&off.images) {
+        let differing = a
+            .iter()
+            .zip(b)
+            .filter(|(p, q)| p.map(f32::to_bits) != q.map(f32::to_bits))
+            .count();
+        assert_eq!(differing, 0, "{}: pixels that differ with {switch}", c.what);
+    }
+    (on.stats, off.stats, lit, pixels)
+}
+
+/// Multi-centre views of a light field display (G10 Eq. 1) onto the
+/// Colin27 head, one per eye x (m), `px` pixels square.
+pub fn colin27_lightfield(eyes: &[f64], px: u32) -> Vec<parallax_common::camera::View> {
+    eyes.iter()
+        .map(|&ex| parallax_common::camera::View {
+            resolution: [px, px],
+            region: [-0.15, -0.15, 0.3, 0.3],
+            eye: [ex, 0.0, 1.5],
+            observer: [0.1, 0.02, 0.9],
+            eta: 1.0,
+        })
+        .collect()
+}
+
+/// Colin27's opaque skin and translucent brain (configs/tf/).
+pub fn colin27_tfs() -> (TransferFunction, TransferFunction) {
+    let load = |f: &str| TransferFunction::load(configs().join("tf").join(f)).unwrap();
+    (load("colin27-skin.toml"), load("colin27-brain.toml"))
+}
+
+/// A clip plane through the head's middle with a 1 cm band of emphasis.
+pub fn clip_plane() -> [parallax_common::tools::Tool; 1] {
+    [parallax_common::tools::Tool::ClipPlane(
+        parallax_common::tools::ClipPlane {
+            point: [0.0, 0.0, 0.02],
+            normal: [0.0, 0.0, 1.0],
+            thickness: 0.01,
+            context: [0.3, 0.7],
+        },
+    )]
+}
+
+/// The 96³ CT phantom (i16 Hounsfield units) imported into `dir`, with the
+/// CT-Bone preset.
+pub fn ct_bone(dir: &Path, encoding: BrickEncoding) -> (std::path::PathBuf, TransferFunction) {
+    let src = dir.join("ct.nrrd");
+    parallax_backend::data::write_synth(
+        parallax_backend::data::SynthKind::Ct,
+        96,
+        VoxelType::I16,
+        &src,
+        |_| {},
+    )
+    .unwrap();
+    let db = dir.join("ct.pxo");
+    import_file(&src, &db, encoding);
+    let tf = TransferFunction::load(configs().join("tf/ct-bone.toml")).unwrap();
+    (db, tf)
+}
+
+/// The CT phantom turned to show its bones, 25 cm across.
+pub fn ct_placement() -> parallax_common::camera::Placement {
+    parallax_common::camera::Placement {
+        center: [0.0; 3],
+        rotation_deg: [-70.0, 30.0, 0.0],
+        size: 0.25,
+    }
+}
