@@ -40,7 +40,7 @@ override COUNT_SAMPLES: bool = false;
 // Fetch each sample one pass ahead of its segment (the sample loop in
 // `main`). Set for pools of float voxels read with the 2D table: on a CPU
 // device a float pool's fetch waits for memory, and the wait then overlaps
-// the segment's table fetch and compositing (Colin27 brain 6–13 % less
+// the segment's table fetch and compositing (Colin27 brain 3–13 % less
 // time, docs/figures.md "The next sample one pass ahead"). With the exact
 // table, or an 8-bit pool whose fetches mostly hit the cache, it saved
 // nothing: the fetch it adds at each leaf's end cost what it hid.
