@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """What fetching each sample one pass ahead buys: the sample loop with the
-kernel's LOOKAHEAD (as Parallax renders pools of float voxels) against the
-same kernel with it made false, in alternating rounds of fresh processes,
-on the views of the VTK comparison.
+kernel's LOOKAHEAD (as Parallax renders pools of float voxels read with the
+2D table) against the same kernel with it made false, in alternating rounds
+of fresh processes, on the views of the VTK comparison.
 
     python3 bench/lookahead.py [--rounds 3] [--csv bench/lookahead.csv]
 

@@ -42,8 +42,8 @@ override COUNT_SAMPLES: bool = false;
 // device a float pool's fetch waits for memory, and the wait then overlaps
 // the segment's table fetch and compositing (Colin27 brain 3–13 % less
 // time, docs/figures.md "The next sample one pass ahead"). With the exact
-// table, or an 8-bit pool whose fetches mostly hit the cache, it saved
-// nothing: the fetch it adds at each leaf's end cost what it hid.
+// table, or an 8-bit pool, it saved nothing measurable, and it adds a
+// fetch at each leaf's end: those kernels keep the plain loop.
 override LOOKAHEAD: bool = false;
 
 // The distance from `p` along `d` (unit, 1/d in `inv_d`) to where the ray

@@ -776,7 +776,8 @@ impl Raycaster {
                 ("GRID_PREINT", flag(grid_preint)),
                 // Sample values fetched one pass ahead (the kernel's
                 // LOOKAHEAD): set for float pools read with the 2D table,
-                // where the table's fetch hides the pool's.
+                // where the pool's wait for memory overlaps the table's
+                // fetch (docs/figures.md).
                 ("LOOKAHEAD", flag(lookahead)),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
