@@ -73,6 +73,36 @@ POOL_FROM_STORAGE = f"""        let f0 = floor(local);
         let v = mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
         return {CHEAP_VALUE} + 1e-30 * v;"""
 
+# The segment's table fetch and compositing, as the composed kernel spells
+# the start of that part of the sample loop.
+SEGMENT = ("            var avg: vec4<f32>;\n"
+           "            if (GRID_PREINT) {")
+# The brain's transfer function is τ ≡ 0 (and so k̃ ≡ 0) up to this value
+# (configs/tf/colin27-brain.toml).
+ZERO_UP_TO = 25.0
+# A segment whose two values both lie below the table's last node in that
+# range reads only nodes that average zero: it adds nothing, exactly.
+ZERO_SKIP = (f"            if ((max(s_prev, s) - frame.tf.x) * frame.grid.x\n"
+             f"                < floor(({ZERO_UP_TO:.1f} - frame.tf.x) * frame.grid.x)) {{\n"
+             "                s_prev = s;\n"
+             "                e_prev = e;\n"
+             "                tc = tn;\n"
+             "                if (tc >= t_exit) {\n"
+             "                    break;\n"
+             "                }\n"
+             "                continue;\n"
+             "            }\n" + SEGMENT)
+# The comparison's one view as constants instead of four reads of the frame
+# table (the 512 × 512 window of bench/vtk_display.toml); a `var`, so that
+# naga does not fold it into the code that divides by its sub-frame.
+VIEW_FETCH = "    let view = view_at(tile.x);\n"
+CONSTANT_VIEW = ("    var view = GpuView(vec4<f32>({x0!r}, {y0!r}, {w!r}, {h!r}), "
+                 "vec4<f32>({ex!r}, {ey!r}, {ez!r}, 0.0),\n"
+                 "                       vec4<f32>({ex!r}, {ey!r}, {ez!r}, 0.0), "
+                 "vec4<u32>({W}u, {H}u, 0u, 0u));\n").format(
+    x0=-vc.SCREEN[0] / 2, y0=-vc.SCREEN[1] / 2, w=vc.SCREEN[0], h=vc.SCREEN[1],
+    ex=float(vc.EYE[0]), ey=float(vc.EYE[1]), ez=float(vc.EYE[2]), W=vc.W, H=vc.H)
+
 # name: (database, step in voxels, replacements, whether the image counts, what it is)
 VARIANTS = {
     "base": ("full-b64", 5.0, [], True,
@@ -86,6 +116,11 @@ VARIANTS = {
     "pool-nearest": ("full-b64", 5.0,
                      [(POOL_FETCH, "        return textureLoad(pool, o + vec3<i32>(local + 0.5), 0).r;")],
                      True, "the nearest voxel (one textureLoad) instead of the trilinear filter"),
+    "zero-skip": ("full-b64", 5.0, [(SEGMENT, ZERO_SKIP)], True,
+                  "segments with both values where the transfer function is zero skip the table "
+                  "and the compositing (the same image)"),
+    "constant-view": ("full-b64", 5.0, [(VIEW_FETCH, CONSTANT_VIEW)], True,
+                      "the view as constants instead of four reads of the frame table (the same image)"),
     "trilinear-3mm": ("full-b64", 3.0, [], True, "bricks of 64, 3 mm: the partner of VTK at 2 mm"),
     "no-pool-fetch": ("full-b64", 5.0, [(POOL_FETCH, f"        return {CHEAP_VALUE};")], False,
                       "cost only: a few operations instead of the pool's filtered fetch"),
@@ -129,16 +164,19 @@ def write_variant(kdir, name, src, changes):
     return path
 
 
-def rounds_arguments(doc, csv_name):
-    """The options of a script timing rounds of Parallax runs: the
-    arguments, the output folder and the binary."""
+def rounds_arguments(doc, csv_name, extra=None):
+    """The options of a script timing rounds of Parallax runs (and those
+    `extra` adds to the parser): the arguments, the output folder and the
+    binary."""
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    if extra:
+        extra(ap)
     ap.add_argument("--parallax", default=str(ROOT / "target/release/parallax"))
     ap.add_argument("--out", default=str(ROOT / "out/bench-vtk"))
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--frames", type=int, default=16)
     ap.add_argument("--quiet", type=float, default=3.0, help="seconds of quiet before each timed run")
-    ap.add_argument("--csv", default=str(vc.BENCH / csv_name))
+    ap.add_argument("--csv", default=str(vc.BENCH / csv_name) if csv_name else None)
     a = ap.parse_args()
     vc.QUIET_S = a.quiet
     return a, Path(a.out).resolve(), str(Path(a.parallax).resolve())
