@@ -92,6 +92,25 @@ ZERO_SKIP = (f"            if ((max(s_prev, s) - frame.tf.x) * frame.grid.x\n"
              "                }\n"
              "                continue;\n"
              "            }\n" + SEGMENT)
+# A midpoint sample where a segment's two values differ by more than
+# JUMP (data units): two half segments instead of one, refined where the
+# scalar changes most.
+JUMP = 60.0
+REFINE_JUMPS = f"""            if (abs(s - s_prev) > {JUMP:.1f}) {{
+                let tm = 0.5 * (tc + tn);
+                let sm = sample_levels(lv, blend, o + d * tm);
+                let half = grid_average(s_prev, sm);
+                var first: Sample;
+                first.len = tm - tc;
+                first.tau = half.x;
+                first.emission = half.yzw;
+                first.alpha_scale = 1.0;
+                first.alpha_mix = 0.0;
+                accumulate(&acc, segment_optics(first, 1.0), first);
+                s_prev = sm;
+                tc = tm;
+            }}
+""" + SEGMENT
 # The comparison's one view as constants instead of four reads of the frame
 # table (the 512 × 512 window of bench/vtk_display.toml); a `var`, so that
 # naga does not fold it into the code that divides by its sub-frame.
@@ -121,6 +140,9 @@ VARIANTS = {
                   "and the compositing (the same image)"),
     "constant-view": ("full-b64", 5.0, [(VIEW_FETCH, CONSTANT_VIEW)], True,
                       "the view as constants instead of four reads of the frame table (the same image)"),
+    "refine-jumps": ("full-b64", 5.0, [(SEGMENT, REFINE_JUMPS)], True,
+                     f"a midpoint sample where a segment's values differ by more than {JUMP:g}"),
+    "trilinear-4mm": ("full-b64", 4.0, [], True, "bricks of 64, 4 mm"),
     "trilinear-3mm": ("full-b64", 3.0, [], True, "bricks of 64, 3 mm: the partner of VTK at 2 mm"),
     "no-pool-fetch": ("full-b64", 5.0, [(POOL_FETCH, f"        return {CHEAP_VALUE};")], False,
                       "cost only: a few operations instead of the pool's filtered fetch"),
