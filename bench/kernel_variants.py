@@ -204,6 +204,25 @@ def rounds_arguments(doc, csv_name, extra=None):
     return a, Path(a.out).resolve(), str(Path(a.parallax).resolve())
 
 
+def write_csv(path, rows):
+    """`rows` (dicts with the same keys) as a CSV file at `path`."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def log_rounds(rows, name, ratio, against):
+    """The table of a rounds script: each row's `name`, RMSE ("cost only"
+    where it has none), median ms, `ratio` to the row named `against`, and
+    its runs."""
+    vc.log(f"\n{name:18s} {'RMSE':>10s} {'ms':>7s} {'/ ' + against:>8s}  (runs, ms)")
+    for row in rows:
+        vc.log(f"{row[name]:18s} {row['rmse'] or 'cost only':>10s} {row['render_ms']:7.1f} "
+               f"{row[ratio]:8.3f}  ({row['runs_ms']})")
+
+
 def main():
     a, out, px = rounds_arguments(__doc__, "kernel_variants.csv")
     ref_path = out / f"{CASE}-reference.npy"
@@ -259,14 +278,8 @@ def main():
         rows.append(dict(variant=k, what=what, rmse=f"{errors[k]:.4e}" if counts else "",
                          render_ms=round(med[k], 2), runs_ms=" ".join(f"{t:.1f}" for t in times[k]),
                          ratio_to_base=round(med[k] / med["base"], 3)))
-    with open(a.csv, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    vc.log(f"\n{'variant':18s} {'RMSE':>10s} {'ms':>7s} {'/ base':>7s}  (runs, ms)")
-    for row in rows:
-        vc.log(f"{row['variant']:18s} {row['rmse'] or 'cost only':>10s} {row['render_ms']:7.1f} "
-               f"{row['ratio_to_base']:7.3f}  ({row['runs_ms']})")
+    write_csv(a.csv, rows)
+    log_rounds(rows, "variant", "ratio_to_base", "base")
     vc.log(f"\nParallax / VTK at equal or lower error: base / VTK 4 mm {med['base'] / med['vtk-4mm']:.2f}, "
            f"pool-nearest / VTK 4 mm {med['pool-nearest'] / med['vtk-4mm']:.2f}, "
            f"trilinear-3mm / VTK 2 mm {med['trilinear-3mm'] / med['vtk-2mm']:.2f}")

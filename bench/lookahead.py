@@ -19,7 +19,6 @@ Without the 2D table, and on 8-bit bricks, Parallax renders without it (the
 runs that chose so are in docs/figures.md, "The next sample one pass
 ahead").
 """
-import csv
 import os
 import statistics
 import sys
@@ -91,10 +90,7 @@ def main():
         rows.append(row)
         vc.log(f"{s['case']:14s} {s['db']:18s} {s['step']:5g} {row['rmse']:>10s} "
                f"{la:9.1f} {pl:7.1f} {la / pl:6.3f}  ({row['lookahead_runs']} | {row['plain_runs']})")
-    with open(a.csv, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    kv.write_csv(a.csv, rows)
     vc.log(f"written: {a.csv} (each pair of images the same bit for bit)")
 
 

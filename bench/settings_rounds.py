@@ -23,7 +23,6 @@ round runs every setting once (`parallax render --sync`, 16 frames, the
 median render_ms of the last 8) after a few quiet seconds; the table gives
 each setting's RMSE and the median over the rounds.
 """
-import csv
 import statistics
 import sys
 from pathlib import Path
@@ -97,15 +96,8 @@ def main():
                  runs_ms=" ".join(f"{t:.1f}" for t in times[n]),
                  ratio_to_first=round(med[n] / med[first], 3))
             for n, db, render in settings]
-    csv_path.parent.mkdir(parents=True, exist_ok=True)
-    with open(csv_path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    vc.log(f"\n{'setting':18s} {'RMSE':>10s} {'ms':>7s} {'/ first':>7s}  (runs, ms)")
-    for row in rows:
-        vc.log(f"{row['setting']:18s} {row['rmse']:>10s} {row['render_ms']:7.1f} "
-               f"{row['ratio_to_first']:7.3f}  ({row['runs_ms']})")
+    kv.write_csv(csv_path, rows)
+    kv.log_rounds(rows, "setting", "ratio_to_first", "first")
     vc.log(f"written: {csv_path}")
 
 
