@@ -39,10 +39,12 @@ imported with bricks of 64 voxels instead of 32 (`parallax import --brick
 64`: half as many leaves along a ray, so less traversal per ray; the finest
 level is the same data) on the coarser steps (BIG_BRICK_STEPS), where that
 cost weighs most. Where a case's bricks are 8-bit, both ladders run on
-full-precision bricks too. Then, for each VTK setting, the ladder that
-holds its partner is bisected twice (REFINE) between its largest step as
-accurate as VTK and its next, so that the partner's step is not set by the
-ladder's spacing.
+full-precision bricks too. A third ladder draws the full-precision bricks
+of 64 one level of detail coarser (render.accuracy = 6: level 1, 2 mm
+voxels, on every case's view; COARSE_STEPS). Then, for each VTK setting,
+the ladder that holds its partner is bisected twice (REFINE) between its
+largest step as accurate as VTK and its next, so that the partner's step
+is not set by the ladder's spacing.
 
 Timing: Parallax's render_ms (median of the last 8 of 16 --sync frames)
 against the wall time of renWin.Render() (median of 5 after a warm-up).
@@ -101,6 +103,13 @@ EXTRA_STEPS = [2.0, 4.0]          # coarser, to find equal-error pairs
 # ladder of steps so that each VTK setting finds its equal-error partner.
 TABLE_STEPS = [0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]
 BIG_BRICK_STEPS = [1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 5.5, 6.0, 7.0, 8.0]
+# One level of detail coarser (2 mm voxels, the full-precision bricks of
+# 64): render.accuracy 6 (a voxel may cover up to 6 pixels) draws every
+# case's level 1 on this view, whose level-0 voxels cover 1.7–2.3 pixels.
+# Its steps in mm; step_factor counts the level's voxels, half as many.
+COARSE_ACCURACY = 6.0
+COARSE_VOXEL_MM = 2.0
+COARSE_STEPS = [2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0]
 # Bisections of the partner's ladder between its rungs, per VTK setting.
 REFINE = 2
 STAGES = ["refine_ms", "upload_ms", "index_ms", "render_ms", "output_ms", "total_ms"]
@@ -910,15 +919,24 @@ def run_case(case, a, px, out, volume):
     # table fetches each sample a pass ahead, LOOKAHEAD; on a CPU device
     # that made the skin at 1 mm take 0.84 of the 8-bit pool's time,
     # bench/settings_skin.csv).
+    # A ladder: (database, steps in mm, voxel of the level drawn in mm,
+    # further render settings).
     ladders = {}
     for kind in ["full"] if case["full"] else ["8-bit", "full"]:
-        ladders[f"{kind} bricks, 2D table"] = (kind, TABLE_STEPS)
-        ladders[f"{kind} bricks of 64, 2D table"] = (f"{kind}-b64", BIG_BRICK_STEPS)
+        ladders[f"{kind} bricks, 2D table"] = (kind, TABLE_STEPS, 1.0, {})
+        ladders[f"{kind} bricks of 64, 2D table"] = (f"{kind}-b64", BIG_BRICK_STEPS, 1.0, {})
+    # Level 1 of the float bricks of 64: where a case's error allows it
+    # (the opaque skin at VTK's coarsest step), half the leaves along a ray
+    # and a shorter descent (bench/settings_rounds.py trials, docs/figures.md).
+    ladders["full bricks of 64, 2D table, level 1"] = (
+        "full-b64", COARSE_STEPS, COARSE_VOXEL_MM, dict(accuracy=COARSE_ACCURACY))
 
     def table_run(label, s):
-        db = ladders[label][0]
-        run = f"{name}-ours-{db}-2d-step{s}-etvtk"
-        render = dict(step_factor=s, early_termination=VTK_EARLY_TERMINATION, preintegration="2d")
+        db, _, voxel, extra = ladders[label]
+        level = "" if voxel == 1.0 else "-level1"
+        run = f"{name}-ours-{db}-2d{level}-step{s}-etvtk"
+        render = dict(step_factor=round(s / voxel, 4), early_termination=VTK_EARLY_TERMINATION,
+                      preintegration="2d", **extra)
         img, st = run_parallax(px, run, base, dbs[db], render, out, a.frames, a.reuse)
         rmse, mx, psnr = image_error(img, ref)
         row = parallax_row(name, label, s, VTK_EARLY_TERMINATION, st, rmse, mx, psnr,
@@ -926,7 +944,7 @@ def run_case(case, a, px, out, volume):
         rows.append(row)
         return row
 
-    for label, (_, steps) in ladders.items():
+    for label, (_, steps, _, _) in ladders.items():
         for s in steps:
             table_run(label, s)
 
