@@ -4,7 +4,7 @@ samples would buy: times variants of the ray-casting kernel, each made from
 the kernel the view really uses by one textual change, beside VTK's
 vtkFixedPointVolumeRayCastMapper, in alternating rounds of fresh processes.
 
-    python3 bench/kernel_variants.py [--rounds 3] [--csv bench/kernel_variants.csv]
+    python3 bench/kernel_variants.py [--rounds 3] [--csv bench/kernel_variants.csv] [--only NAME,...]
 
 Needs what `bash bench/vtk_compare.sh` leaves in out/bench-vtk (the Colin27
 databases, the brain's reference render) and a release build; imports the
@@ -111,6 +111,28 @@ REFINE_JUMPS = f"""            if (abs(s - s_prev) > {JUMP:.1f}) {{
                 tc = tm;
             }}
 """ + SEGMENT
+# Danskin and Hanrahan's idea ("Fast algorithms for volume ray tracing",
+# 1992) of sampling less densely as the ray's accumulated opacity grows:
+# each pass's next step h0·min(T^(−1/2), 4), T = 1 − α the transmittance
+# so far (one segment behind, as the lookahead fetches the next sample
+# before it composites), the grid re-anchored at the sample where the step
+# changes. A segment's error reaches the pixel weighted by T.
+OPACITY_STEP_GROWTH = "clamp(pow(max(1.0 - acc.alpha, 1e-12), -0.5), 1.0, 4.0)"
+OPACITY_STEP = [
+    ("        var tc = t;\n        var k = 1u;\n",
+     f"        let h0 = h;\n        h = h0 * {OPACITY_STEP_GROWTH};\n        var ta = t;\n"
+     "        var tc = t;\n        var k = 1u;\n"),
+    ("            let tn = next_sample(&ray, t, h, &k, tc, t_exit);",
+     "            let tn = next_sample(&ray, ta, h, &k, tc, t_exit);"),
+    ("            tn_next = next_sample(&ray, t, h, &k, tc, t_exit);",
+     "            tn_next = next_sample(&ray, ta, h, &k, tc, t_exit);"),
+    ("                    tn_next = next_sample(&ray, t, h, &k, tn, t_exit);",
+     f"                    let hb = h0 * {OPACITY_STEP_GROWTH};\n"
+     "                    if (hb != h) {\n                        ta = tn;\n                        k = 1u;\n"
+     "                        h = hb;\n                    }\n"
+     "                    tn_next = next_sample(&ray, ta, h, &k, tn, t_exit);"),
+]
+
 # The comparison's one view as constants instead of four reads of the frame
 # table (the 512 × 512 window of bench/vtk_display.toml); a `var`, so that
 # naga does not fold it into the code that divides by its sub-frame.
@@ -142,6 +164,10 @@ VARIANTS = {
                       "the view as constants instead of four reads of the frame table (the same image)"),
     "refine-jumps": ("full-b64", 5.0, [(SEGMENT, REFINE_JUMPS)], True,
                      f"a midpoint sample where a segment's values differ by more than {JUMP:g}"),
+    "opacity-step-5mm": ("full-b64", 5.0, OPACITY_STEP, True,
+                         "the step growing as the ray's opacity does, up to 4×, from 5 mm"),
+    "opacity-step-4mm": ("full-b64", 4.0, OPACITY_STEP, True, "the same from 4 mm"),
+    "opacity-step-3mm": ("full-b64", 3.0, OPACITY_STEP, True, "the same from 3 mm"),
     "trilinear-4mm": ("full-b64", 4.0, [], True, "bricks of 64, 4 mm"),
     "trilinear-3mm": ("full-b64", 3.0, [], True, "bricks of 64, 3 mm: the partner of VTK at 2 mm"),
     "no-pool-fetch": ("full-b64", 5.0, [(POOL_FETCH, f"        return {CHEAP_VALUE};")], False,
@@ -224,7 +250,13 @@ def log_rounds(rows, name, ratio, against):
 
 
 def main():
-    a, out, px = rounds_arguments(__doc__, "kernel_variants.csv")
+    def only(ap):
+        ap.add_argument("--only", help="the variants to run, comma-separated (the base always runs)")
+    a, out, px = rounds_arguments(__doc__, "kernel_variants.csv", only)
+    names = ["base"] + [n for n in (a.only or "").split(",") if n and n != "base"] if a.only else list(VARIANTS)
+    for n in names:
+        if n not in VARIANTS:
+            sys.exit(f"--only: no variant {n!r} (there are {', '.join(VARIANTS)})")
     ref_path = out / f"{CASE}-reference.npy"
     dbs = {k: out / f"colin27-{k}.pxo" for k in ["full-b64", "full-b128"]}
     if not dbs["full-b64"].exists() or not ref_path.exists():
@@ -242,11 +274,11 @@ def main():
     kdir = out / "kernel-variants"
     src = dump_kernel(px, kdir, base, dbs["full-b64"], render(5.0))
     sources = {}
-    for name, (_, _, changes, _, _) in VARIANTS.items():
-        if changes:
-            sources[name] = write_variant(kdir, name, src, changes)
+    for name in names:
+        if VARIANTS[name][2]:
+            sources[name] = write_variant(kdir, name, src, VARIANTS[name][2])
 
-    times = {k: [] for k in list(VARIANTS) + [f"vtk-{s:g}mm" for s in VTK_STEPS]}
+    times = {k: [] for k in names + [f"vtk-{s:g}mm" for s in VTK_STEPS]}
     errors = {}
     for r in range(1, a.rounds + 1):
         vc.log(f"round {r} of {a.rounds}")
@@ -260,7 +292,8 @@ def main():
             d = json.loads(line[len("VTKTIME "):])
             times[f"vtk-{s:g}mm"].append(statistics.median(d["times"]))
             errors[f"vtk-{s:g}mm"] = d["rmse"]
-        for name, (db, step, _, counts, _) in VARIANTS.items():
+        for name in names:
+            db, step = VARIANTS[name][:2]
             if name in sources:
                 os.environ["PARALLAX_KERNEL_SOURCE"] = str(sources[name])
             else:
@@ -280,9 +313,9 @@ def main():
                          ratio_to_base=round(med[k] / med["base"], 3)))
     write_csv(a.csv, rows)
     log_rounds(rows, "variant", "ratio_to_base", "base")
-    vc.log(f"\nParallax / VTK at equal or lower error: base / VTK 4 mm {med['base'] / med['vtk-4mm']:.2f}, "
-           f"pool-nearest / VTK 4 mm {med['pool-nearest'] / med['vtk-4mm']:.2f}, "
-           f"trilinear-3mm / VTK 2 mm {med['trilinear-3mm'] / med['vtk-2mm']:.2f}")
+    pairs = [("base", "vtk-4mm"), ("pool-nearest", "vtk-4mm"), ("trilinear-3mm", "vtk-2mm")]
+    vc.log("\nParallax / VTK at equal or lower error: " + ", ".join(
+        f"{x} / {y} {med[x] / med[y]:.2f}" for x, y in pairs if x in med))
     vc.log(f"written: {a.csv}")
 
 
