@@ -51,6 +51,20 @@ TABLE_FETCH = ("    return max(textureSampleLevel(preint_grid, grid_sampler, "
 LEAF_LOOP = ("            // An all-empty leaf ends with its starting sample, at its exit.\n"
              "            if (tc >= t_exit) {")
 
+TABLE_NEAREST = "    return max(textureLoad(preint_grid, vec2<i32>(g + 0.5), 0),"
+# A segment's opacity and colour weight α/τ̄ (segment_optics), and the same
+# weight as d·(1 − x/2) without the division and the branch: the opacity,
+# and so where rays end, is unchanged.
+OPTICS = """    if (x < 1e-4) {
+        a = x * (1.0 - 0.5 * x);
+        w = smp.len * (1.0 - 0.5 * x);
+    } else {
+        a = 1.0 - exp(-x);
+        w = a / max(smp.tau, 1e-30);
+    }"""
+PLAIN_OPTICS = """    a = 1.0 - exp(-x);
+    w = smp.len * (1.0 - 0.5 * x);"""
+
 # The sample loop without its lookahead (each pass fetching its own sample,
 # not the next pass's): the kernel's LOOKAHEAD made false where it is read.
 PLAIN_LOOP = [("if (LOOKAHEAD && tc < t_exit) {", "if (false && tc < t_exit) {"),
@@ -151,12 +165,15 @@ VARIANTS = {
     "bricks-128": ("full-b128", 5.0, [], True, "bricks of 128, 5 mm"),
     "plain-loop": ("full-b64", 5.0, PLAIN_LOOP, True,
                    "each pass fetching its own sample (no LOOKAHEAD)"),
-    "table-nearest": ("full-b64", 5.0,
-                      [(TABLE_FETCH, "    return max(textureLoad(preint_grid, vec2<i32>(g + 0.5), 0),")],
-                      True, "the 2D table's nearest node (one textureLoad) instead of its bilinear fetch"),
+    "table-nearest": ("full-b64", 5.0, [(TABLE_FETCH, TABLE_NEAREST)], True, "the 2D table's nearest node (one textureLoad) instead of its bilinear fetch"),
     "pool-nearest": ("full-b64", 5.0,
                      [(POOL_FETCH, "        return textureLoad(pool, o + vec3<i32>(local + 0.5), 0).r;")],
                      True, "the nearest voxel (one textureLoad) instead of the trilinear filter"),
+    "plain-1.62mm": ("full", 1.62, [], True, "bricks of 32, 1.62 mm: the partner of VTK at 1 mm"),
+    "table-nearest-1.62mm": ("full", 1.62, [(TABLE_FETCH, TABLE_NEAREST)], True,
+                             "the same with the 2D table's nearest node"),
+    "plain-optics": ("full-b64", 5.0, [(OPTICS, PLAIN_OPTICS)], False,
+                     "cost only: a segment's colour weight without its division and branch"),
     "zero-skip": ("full-b64", 5.0, [(SEGMENT, ZERO_SKIP)], True,
                   "segments with both values where the transfer function is zero skip the table "
                   "and the compositing (the same image)"),
@@ -258,7 +275,7 @@ def main():
         if n not in VARIANTS:
             sys.exit(f"--only: no variant {n!r} (there are {', '.join(VARIANTS)})")
     ref_path = out / f"{CASE}-reference.npy"
-    dbs = {k: out / f"colin27-{k}.pxo" for k in ["full-b64", "full-b128"]}
+    dbs = {k: out / f"colin27-{k}.pxo" for k in ["full", "full-b64", "full-b128"]}
     if not dbs["full-b64"].exists() or not ref_path.exists():
         sys.exit(f"{dbs['full-b64']} or {ref_path} missing: run bash bench/vtk_compare.sh first")
     if not dbs["full-b128"].exists():
