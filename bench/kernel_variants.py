@@ -51,6 +51,7 @@ TABLE_FETCH = ("    return max(textureSampleLevel(preint_grid, grid_sampler, "
 LEAF_LOOP = ("            // An all-empty leaf ends with its starting sample, at its exit.\n"
              "            if (tc >= t_exit) {")
 
+# The 2D table's nearest node: one textureLoad instead of the bilinear fetch.
 TABLE_NEAREST = "    return max(textureLoad(preint_grid, vec2<i32>(g + 0.5), 0),"
 # A segment's opacity and colour weight α/τ̄ (segment_optics), and the same
 # weight as d·(1 − x/2) without the division and the branch: the opacity,
@@ -165,7 +166,8 @@ VARIANTS = {
     "bricks-128": ("full-b128", 5.0, [], True, "bricks of 128, 5 mm"),
     "plain-loop": ("full-b64", 5.0, PLAIN_LOOP, True,
                    "each pass fetching its own sample (no LOOKAHEAD)"),
-    "table-nearest": ("full-b64", 5.0, [(TABLE_FETCH, TABLE_NEAREST)], True, "the 2D table's nearest node (one textureLoad) instead of its bilinear fetch"),
+    "table-nearest": ("full-b64", 5.0, [(TABLE_FETCH, TABLE_NEAREST)], True,
+                      "the 2D table's nearest node (one textureLoad) instead of its bilinear fetch"),
     "pool-nearest": ("full-b64", 5.0,
                      [(POOL_FETCH, "        return textureLoad(pool, o + vec3<i32>(local + 0.5), 0).r;")],
                      True, "the nearest voxel (one textureLoad) instead of the trilinear filter"),
@@ -260,9 +262,10 @@ def log_rounds(rows, name, ratio, against):
     """The table of a rounds script: each row's `name`, RMSE ("cost only"
     where it has none), median ms, `ratio` to the row named `against`, and
     its runs."""
-    vc.log(f"\n{name:18s} {'RMSE':>10s} {'ms':>7s} {'/ ' + against:>8s}  (runs, ms)")
+    w = max(18, *(len(row[name]) for row in rows))
+    vc.log(f"\n{name:{w}s} {'RMSE':>10s} {'ms':>7s} {'/ ' + against:>8s}  (runs, ms)")
     for row in rows:
-        vc.log(f"{row[name]:18s} {row['rmse'] or 'cost only':>10s} {row['render_ms']:7.1f} "
+        vc.log(f"{row[name]:{w}s} {row['rmse'] or 'cost only':>10s} {row['render_ms']:7.1f} "
                f"{row[ratio]:8.3f}  ({row['runs_ms']})")
 
 
@@ -270,7 +273,9 @@ def main():
     def only(ap):
         ap.add_argument("--only", help="the variants to run, comma-separated (the base always runs)")
     a, out, px = rounds_arguments(__doc__, "kernel_variants.csv", only)
-    names = ["base"] + [n for n in (a.only or "").split(",") if n and n != "base"] if a.only else list(VARIANTS)
+    names = list(VARIANTS)
+    if a.only:
+        names = ["base"] + [n for n in a.only.split(",") if n and n != "base"]
     for n in names:
         if n not in VARIANTS:
             sys.exit(f"--only: no variant {n!r} (there are {', '.join(VARIANTS)})")

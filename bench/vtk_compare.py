@@ -83,6 +83,7 @@ import time
 import tomllib
 import zlib
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -112,6 +113,19 @@ COARSE_VOXEL_MM = 2.0
 COARSE_STEPS = [2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0]
 # Bisections of the partner's ladder between its rungs, per VTK setting.
 REFINE = 2
+
+
+class Ladder(NamedTuple):
+    """A ladder of Parallax runs with the 2D table: the database (a key of
+    run_case's `dbs`), its steps in mm, the voxel of the level it draws in
+    mm (step_factor = step / voxel_mm), further render settings, and a tag
+    for its runs' names."""
+    db: str
+    steps: list
+    voxel_mm: float = 1.0
+    render: dict | None = None
+    tag: str = ""
+
 STAGES = ["refine_ms", "upload_ms", "index_ms", "render_ms", "output_ms", "total_ms"]
 
 
@@ -914,38 +928,35 @@ def run_case(case, a, px, out, volume):
                 rows.append(parallax_row(name, f"{bricks} bricks", s, et, st, rmse, mx, psnr,
                                          (run, dbs[bricks], dict(step_factor=s, early_termination=et))))
 
-    # The 2D table's ladders: on the case's bricks, and where those are
-    # 8-bit on full-precision bricks too (a float pool read with the 2D
-    # table fetches each sample a pass ahead, LOOKAHEAD; on a CPU device
-    # that made the skin at 1 mm take 0.84 of the 8-bit pool's time,
-    # bench/settings_skin.csv).
-    # A ladder: (database, steps in mm, voxel of the level drawn in mm,
-    # further render settings).
+    # The 2D table's ladders, by label: on the case's bricks, and where
+    # those are 8-bit on full-precision bricks too (a float pool read with
+    # the 2D table fetches each sample a pass ahead, LOOKAHEAD; on a CPU
+    # device that made the skin at 1 mm take 0.84 of the 8-bit pool's
+    # time, bench/settings_skin.csv); and level 1 of the float bricks of
+    # 64, where a case's error allows it (the opaque skin at VTK's coarser
+    # steps: a quarter of the leaves and a shorter descent per ray,
+    # docs/figures.md).
     ladders = {}
     for kind in ["full"] if case["full"] else ["8-bit", "full"]:
-        ladders[f"{kind} bricks, 2D table"] = (kind, TABLE_STEPS, 1.0, {})
-        ladders[f"{kind} bricks of 64, 2D table"] = (f"{kind}-b64", BIG_BRICK_STEPS, 1.0, {})
-    # Level 1 of the float bricks of 64: where a case's error allows it
-    # (the opaque skin at VTK's coarsest step), half the leaves along a ray
-    # and a shorter descent (bench/settings_rounds.py trials, docs/figures.md).
-    ladders["full bricks of 64, 2D table, level 1"] = (
-        "full-b64", COARSE_STEPS, COARSE_VOXEL_MM, dict(accuracy=COARSE_ACCURACY))
+        ladders[f"{kind} bricks, 2D table"] = Ladder(kind, TABLE_STEPS)
+        ladders[f"{kind} bricks of 64, 2D table"] = Ladder(f"{kind}-b64", BIG_BRICK_STEPS)
+    ladders["full bricks of 64, 2D table, level 1"] = Ladder(
+        "full-b64", COARSE_STEPS, COARSE_VOXEL_MM, dict(accuracy=COARSE_ACCURACY), "-level1")
 
     def table_run(label, s):
-        db, _, voxel, extra = ladders[label]
-        level = "" if voxel == 1.0 else "-level1"
-        run = f"{name}-ours-{db}-2d{level}-step{s}-etvtk"
-        render = dict(step_factor=round(s / voxel, 4), early_termination=VTK_EARLY_TERMINATION,
-                      preintegration="2d", **extra)
-        img, st = run_parallax(px, run, base, dbs[db], render, out, a.frames, a.reuse)
+        ld = ladders[label]
+        run = f"{name}-ours-{ld.db}-2d{ld.tag}-step{s}-etvtk"
+        render = dict(step_factor=round(s / ld.voxel_mm, 4), early_termination=VTK_EARLY_TERMINATION,
+                      preintegration="2d", **(ld.render or {}))
+        img, st = run_parallax(px, run, base, dbs[ld.db], render, out, a.frames, a.reuse)
         rmse, mx, psnr = image_error(img, ref)
         row = parallax_row(name, label, s, VTK_EARLY_TERMINATION, st, rmse, mx, psnr,
-                           (run, dbs[db], render))
+                           (run, dbs[ld.db], render))
         rows.append(row)
         return row
 
-    for label, (_, steps, _, _) in ladders.items():
-        for s in steps:
+    for label, ld in ladders.items():
+        for s in ld.steps:
             table_run(label, s)
 
     # ---- VTK, on Parallax's domain (padded + cropped) and as it comes.
