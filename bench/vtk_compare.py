@@ -934,7 +934,7 @@ def run_case(case, a, px, out, volume):
     # device that made the skin at 1 mm take 0.84 of the 8-bit pool's
     # time, bench/settings_skin.csv); and level 1 of the float bricks of
     # 64, where a case's error allows it (the opaque skin at VTK's coarser
-    # steps: a quarter of the leaves and a shorter descent per ray,
+    # steps: half the leaves and a shorter descent per ray,
     # docs/figures.md).
     ladders = {}
     for kind in ["full"] if case["full"] else ["8-bit", "full"]:
