@@ -31,14 +31,19 @@ window framebuffer (what a VTK user sees). Early termination: VTK stops a
 ray at opacity 1 − 255/32768; Parallax is timed with that threshold and
 with none.
 
-Parallax is also run with the 2D pre-integration table (render.preintegration
-= "2d": one bilinear texture fetch a segment instead of the exact table's
-five reads, which dominate a sample's cost on lavapipe) on a finer ladder of
-steps (TABLE_STEPS), early termination matched; and the same from a database
-imported with bricks of 64 voxels instead of 32 (`parallax import --brick
-64`: half as many leaves along a ray, so less traversal per ray; the finest
-level is the same data) on the coarser steps (BIG_BRICK_STEPS), where that
-cost weighs most. Where a case's bricks are 8-bit, both ladders run on
+Parallax is also run with a cheaper pre-integration than the exact table's
+five reads, which dominate a sample's cost on lavapipe (the case's
+`preint`): the exact integral in closed form (render.preintegration =
+"analytic": per segment, a few products per piece of the transfer function
+between its control points) for the two Colin27 functions of 4 and 6
+points, or the 2D table (render.preintegration = "2d": one bilinear fetch
+a segment, what every case used before, bench/vtk_results_xeon_level1.csv)
+for the CT's 14, where the closed form's pieces cost more than the fetch;
+on a finer ladder of steps (TABLE_STEPS), early termination matched; and the same
+from a database imported with bricks of 64 voxels instead of 32 (`parallax
+import --brick 64`: half as many leaves along a ray, so less traversal per
+ray; the finest level is the same data) on the coarser steps
+(BIG_BRICK_STEPS), where that cost weighs most. Where a case's bricks are 8-bit, both ladders run on
 full-precision bricks too. A third ladder draws the full-precision bricks
 of 64 one level of detail coarser (render.accuracy = 6: level 1, 2 mm
 voxels, on every case's view; COARSE_STEPS). Then, for each VTK setting,
@@ -99,9 +104,10 @@ EYE = np.array([0.0, 0.0, 0.8])
 VTK_EARLY_TERMINATION = 1.0 - 255.0 / 32768.0
 STEPS = [0.25, 0.5, 1.0]          # matched steps (mm): ours and VTK
 EXTRA_STEPS = [2.0, 4.0]          # coarser, to find equal-error pairs
-# Parallax with the 2D pre-integration table (render.preintegration = "2d",
-# one bilinear fetch a segment), early termination matched, on a finer
-# ladder of steps so that each VTK setting finds its equal-error partner.
+# The ladders below pre-integrate as the case's `preint` says, early
+# termination matched, on a finer ladder of steps so that each VTK setting
+# finds its equal-error partner; their labels name it.
+PREINT_LABELS = {"analytic": "closed form", "2d": "2D table"}
 TABLE_STEPS = [0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]
 BIG_BRICK_STEPS = [1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 5.5, 6.0, 7.0, 8.0]
 # One level of detail coarser (2 mm voxels, the full-precision bricks of
@@ -116,7 +122,7 @@ REFINE = 2
 
 
 class Ladder(NamedTuple):
-    """A ladder of Parallax runs with the 2D table: the database (a key of
+    """A ladder of Parallax runs pre-integrated as its case says: the database (a key of
     run_case's `dbs`), its steps in mm, the voxel of the level it draws in
     mm (step_factor = step / voxel_mm), further render settings, and a tag
     for its runs' names."""
@@ -732,13 +738,18 @@ def fmt(x, spec):
 # brick encodings, early termination matched and off, VTK as it comes too),
 # then an opaque view and a CT that is mostly air (8-bit bricks, early
 # termination matched, VTK on Parallax's domain).
+# `preint`: the ladders' render.preintegration. The closed form against the
+# 2D table, one process each (python3 bench/settings_rounds.py, docs/
+# figures.md "The exact integral in closed form"): the brain (4 pieces)
+# 0.87 of the time at 5 mm, the skin (2) 0.93 at 4 mm; the CT (13) 1.11 at
+# 5 mm and 0.99 at 0.88 mm.
 CASES = [
     dict(name="colin27-brain", title="Colin27 MRI, translucent brain", volume="colin27",
-         tf="../configs/tf/colin27-brain.toml", full=True),
+         tf="../configs/tf/colin27-brain.toml", full=True, preint="analytic"),
     dict(name="colin27-skin", title="Colin27 MRI, opaque skin", volume="colin27",
-         tf="../configs/tf/colin27-skin.toml", full=False),
+         tf="../configs/tf/colin27-skin.toml", full=False, preint="analytic"),
     dict(name="ct-bone", title="CT phantom 256³ (i16 Hounsfield units), CT-Bone", volume="ct",
-         tf="../configs/tf/ct-bone.toml", full=False),
+         tf="../configs/tf/ct-bone.toml", full=False, preint="2d"),
 ]
 
 
@@ -928,26 +939,28 @@ def run_case(case, a, px, out, volume):
                 rows.append(parallax_row(name, f"{bricks} bricks", s, et, st, rmse, mx, psnr,
                                          (run, dbs[bricks], dict(step_factor=s, early_termination=et))))
 
-    # The 2D table's ladders, by label: on the case's bricks, and where
-    # those are 8-bit on full-precision bricks too (a float pool read with
-    # the 2D table fetches each sample a pass ahead, LOOKAHEAD; on a CPU
-    # device that made the skin at 1 mm take 0.84 of the 8-bit pool's
-    # time, bench/settings_skin.csv); and level 1 of the float bricks of
+    # The ladders, by label: on the case's bricks, and where those are
+    # 8-bit on full-precision bricks too (a float pool read with the 2D
+    # table or the closed form fetches each sample a pass ahead, LOOKAHEAD;
+    # on a CPU device that made the skin at 1 mm with the 2D table take
+    # 0.84 of the 8-bit pool's time, bench/settings_skin.csv); and level 1 of the float bricks of
     # 64, where a case's error allows it (the opaque skin at VTK's coarser
     # steps: half the leaves and a shorter descent per ray,
     # docs/figures.md).
+    preint = case["preint"]
+    label = PREINT_LABELS[preint]
     ladders = {}
     for kind in ["full"] if case["full"] else ["8-bit", "full"]:
-        ladders[f"{kind} bricks, 2D table"] = Ladder(kind, TABLE_STEPS)
-        ladders[f"{kind} bricks of 64, 2D table"] = Ladder(f"{kind}-b64", BIG_BRICK_STEPS)
-    ladders["full bricks of 64, 2D table, level 1"] = Ladder(
+        ladders[f"{kind} bricks, {label}"] = Ladder(kind, TABLE_STEPS)
+        ladders[f"{kind} bricks of 64, {label}"] = Ladder(f"{kind}-b64", BIG_BRICK_STEPS)
+    ladders[f"full bricks of 64, {label}, level 1"] = Ladder(
         "full-b64", COARSE_STEPS, COARSE_VOXEL_MM, dict(accuracy=COARSE_ACCURACY), "-level1")
 
     def table_run(label, s):
         ld = ladders[label]
-        run = f"{name}-ours-{ld.db}-2d{ld.tag}-step{s}-etvtk"
+        run = f"{name}-ours-{ld.db}-{preint}{ld.tag}-step{s}-etvtk"
         render = dict(step_factor=round(s / ld.voxel_mm, 4), early_termination=VTK_EARLY_TERMINATION,
-                      preintegration="2d", **(ld.render or {}))
+                      preintegration=preint, **(ld.render or {}))
         img, st = run_parallax(px, run, base, dbs[ld.db], render, out, a.frames, a.reuse)
         rmse, mx, psnr = image_error(img, ref)
         row = parallax_row(name, label, s, VTK_EARLY_TERMINATION, st, rmse, mx, psnr,

@@ -517,7 +517,9 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 continue;
             }
             var avg: vec4<f32>;
-            if (GRID_PREINT) {
+            if (ANALYTIC_PREINT) {
+                avg = analytic_average(s_prev, s);
+            } else if (GRID_PREINT) {
                 avg = grid_average(s_prev, s);
             } else if (END_PREINT) {
                 avg = end_average(e_prev, e);

@@ -178,6 +178,19 @@ pub fn run(o: &BenchOptions) -> Result<Vec<Point>> {
             },
         ));
     }
+    // The exact integral in closed form (no table read): the step sweep.
+    for s in [0.125, 0.25, 0.5, 1.0] {
+        sweeps.push((
+            "preintegration_analytic",
+            s,
+            "full",
+            RenderConfig {
+                step_factor: s,
+                preintegration: parallax_common::config::Preintegration::Analytic,
+                ..base.clone()
+            },
+        ));
+    }
     // The old curve: no empty-space skipping inside bricks.
     for s in [0.125, 0.25, 0.5, 1.0] {
         sweeps.push((
@@ -569,6 +582,7 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
         ("multilevel", "full", RGBColor(0, 160, 160)),
         ("tricubic", "full", RGBColor(140, 70, 20)),
         ("preintegration_2d", "full", RGBColor(120, 0, 200)),
+        ("preintegration_analytic", "full", RGBColor(200, 0, 120)),
         ("accuracy", "full", BLUE),
         ("early_termination", "full", GREEN),
         ("step_factor", "8-bit", MAGENTA),

@@ -205,7 +205,7 @@ impl Renderer {
         let empty_refraction = EmptinessTable::new(&tf.refraction_as_extinction(), lo, hi, bins)?;
         self.tf = Some(ActiveTf {
             version,
-            table: TfTable::new(&self.gpu, &table, tf.max_importance()),
+            table: TfTable::new(&self.gpu, &table, tf),
             preint: table,
             empty,
             empty_refraction,
@@ -345,7 +345,7 @@ impl Renderer {
                 }),
             }),
             tricubic: cfg.filter == Filter::Tricubic,
-            preint_2d: cfg.preintegration == Preintegration::TwoD,
+            preintegration: cfg.preintegration,
         }
     }
 
@@ -366,8 +366,15 @@ impl Renderer {
         cfg: &RenderConfig,
     ) -> Result<Frame> {
         let start = Instant::now();
-        if cfg.preintegration == Preintegration::TwoD {
-            if let Some(tf) = self.tf.as_mut() {
+        // The 2D table, for "2d" and for "analytic" where the function has
+        // no closed form the kernel can use.
+        if let Some(tf) = self.tf.as_mut() {
+            let grid = match cfg.preintegration {
+                Preintegration::TwoD => true,
+                Preintegration::Analytic => !tf.table.has_closed_form(),
+                Preintegration::Exact => false,
+            };
+            if grid {
                 tf.table.build_grid(&self.gpu, &tf.preint);
             }
         }

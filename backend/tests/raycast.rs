@@ -12,6 +12,7 @@ use parallax_backend::store::{self, ImportOptions};
 use parallax_backend::store::{BrickEncoding, OctreeDb};
 use parallax_backend::volume::{MemorySource, Volume, VoxelType};
 use parallax_common::camera::{Placement, View};
+use parallax_common::config::Preintegration;
 use parallax_common::tf::{ControlPoint, PreintTable, TransferFunction};
 use std::collections::HashMap;
 
@@ -99,6 +100,7 @@ struct Measured {
     mean_alpha: f64,
     running_integral: bool,
     end_path: bool,
+    closed_form: bool,
     feedback: Vec<u32>,
 }
 
@@ -111,6 +113,8 @@ enum Path {
     Segment,
     /// The 2D table, bilinearly (`preintegration = "2d"`).
     Grid,
+    /// In closed form (`preintegration = "analytic"`).
+    Analytic,
 }
 
 fn measure(
@@ -125,7 +129,7 @@ fn measure(
     let range = (s.db.summary.value_min, s.db.summary.value_max);
     let (lo, hi) = (range.0 as f64, range.1 as f64);
     let table = PreintTable::new(f, lo, hi, PreintTable::suggested_bins(lo, hi, true)).unwrap();
-    let mut gtf = TfTable::new(gpu, &table, f.max_importance());
+    let mut gtf = TfTable::new(gpu, &table, f);
     gtf.allow_end_path(path == Path::End);
     if path == Path::Grid {
         gtf.build_grid(gpu, &table);
@@ -137,7 +141,11 @@ fn measure(
         step_factor: 0.125,
         early_termination: 1.0,
         shading: false,
-        preint_2d: path == Path::Grid,
+        preintegration: match path {
+            Path::Grid => Preintegration::TwoD,
+            Path::Analytic => Preintegration::Analytic,
+            _ => Preintegration::Exact,
+        },
         ..Default::default()
     };
     let mut out = rc
@@ -165,6 +173,7 @@ fn measure(
         mean_alpha,
         running_integral: gtf.uses_running_integral(),
         end_path: gtf.uses_end_path(),
+        closed_form: gtf.has_closed_form(),
         feedback: out.feedback,
     }
 }
@@ -254,7 +263,7 @@ fn traversal_covers_every_path_exactly_once() {
     let f =
         TransferFunction::from_points(vec![ControlPoint::new(0.0, [1.0, 0.5, 0.25], tau)]).unwrap();
     let table = PreintTable::new(&f, 0.0, 255.0, 255).unwrap();
-    let gtf = TfTable::new(&gpu, &table, f.max_importance());
+    let gtf = TfTable::new(&gpu, &table, &f);
     let (cut, pool) = full_cut(&gpu, &db, true);
     let index = SpatialIndex::build(db.layout(), &cut, (100.0, 100.0)).unwrap();
     for rot in [
@@ -347,6 +356,13 @@ fn every_table_path_matches_the_reference() {
         ),
         (spanning(1e-6), Path::End, false, "extreme range: pyramid"),
         (spanning(1e-6), Path::Grid, false, "extreme range: 2D table"),
+        (tf(), Path::Analytic, true, "closed form"),
+        (
+            spanning(1e-6),
+            Path::Analytic,
+            false,
+            "extreme range: closed form",
+        ),
     ] {
         let m = measure(&gpu, &mut rc, &s, &f, &cut, &pool, path);
         assert_eq!(m.running_integral, prefix, "{name}");
@@ -362,6 +378,16 @@ fn every_table_path_matches_the_reference() {
             let (d, dmax) = support::error(&m.image, &first);
             eprintln!("end path against per segment: RMSE {d:.2e}, max {dmax:.2e}");
             assert!(dmax < 2e-6, "the two sums differ by {dmax}");
+        } else if let (Some(first), true) = (&by_end, name == "closed form") {
+            // The same exact integral by another formula: the images agree
+            // to f32 rounding.
+            let first: Vec<[f64; 4]> = first.iter().map(|p| p.map(|x| x as f64)).collect();
+            let (d, dmax) = support::error(&m.image, &first);
+            eprintln!("end path against closed form: RMSE {d:.2e}, max {dmax:.2e}");
+            assert!(dmax < 1e-5, "the two integrals differ by {dmax}");
+        }
+        if path == Path::Analytic {
+            assert!(m.closed_form, "{name}: no closed form");
         }
     }
 }

@@ -131,7 +131,15 @@ pub struct RenderConfig {
     /// nodes, bilinear: one texture fetch a sample, faster on devices where
     /// table reads are dear; its error is in `parallax bench`'s
     /// work–precision table). "2d" needs filterable f32 textures and falls
-    /// back to "exact" without them.
+    /// back to "exact" without them. "analytic": the exact integral again,
+    /// computed per segment in closed form from the transfer function's
+    /// pieces between control points (common/src/tf/closed.rs), no table
+    /// read. Its cost grows with the pieces where τ > 0: on a CPU device,
+    /// where a texture read is a gather per channel and lane, it beats
+    /// "2d" for a few (the Colin27 brain's 4: 0.87 of the frame time) and
+    /// loses for many (the CT-Bone preset's 12: 1.3), docs/figures.md. A
+    /// function with more than 16 such pieces over the data range (or
+    /// extinctions too large for f32 sums) is looked up as with "2d".
     #[serde(default = "exact")]
     pub preintegration: Preintegration,
 }
@@ -142,6 +150,7 @@ pub enum Preintegration {
     Exact,
     #[serde(rename = "2d")]
     TwoD,
+    Analytic,
 }
 
 fn exact() -> Preintegration {

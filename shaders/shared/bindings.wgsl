@@ -98,9 +98,39 @@ var<private> tools: array<ToolParams, 3>;
 @group(0) @binding(12) var preint_grid: texture_2d<f32>;
 @group(0) @binding(13) var grid_sampler: sampler;
 
+// The transfer function's DVR channels in closed form (`preintegration =
+// "analytic"`, common/src/tf/closed.rs `ClosedForm::gpu`): per piece
+// [start, start + width] of the data range, f(x) = q0 + 2·q1·x + 3·q2·x² of
+// (τ, k̃r, k̃g, k̃b) in x = s − start.
+struct TfPiece {
+    span: vec4<f32>,  // start, width, 0, 0
+    q0: vec4<f32>,
+    q1: vec4<f32>,
+    q2: vec4<f32>,
+}
+
+// Whether segments are pre-integrated in closed form, and over how many
+// pieces (a constant, so that a scene pays for the pieces it has).
+override ANALYTIC_PREINT: bool = false;
+override TF_PIECES: u32 = 0u;
+
+struct TfPieces {
+    range: vec4<f32>,  // data vmin, vmax (sample values are clamped to them), segment widening ε, pieces
+    piece: array<TfPiece, 16>,
+}
+
+// Read from a private copy, as the frame's constants are (see below): read
+// from the uniform itself, even at constant indices, the brain's frame of
+// docs/figures.md took 81 ms against 41.
+@group(0) @binding(14) var<uniform> tf_pieces_uniform: TfPieces;
+var<private> tf_pieces: TfPieces;
+
 fn load_constants() {
     frame = frame_uniform;
     tools = tool_uniform;
+    if (ANALYTIC_PREINT) {
+        tf_pieces = tf_pieces_uniform;
+    }
 }
 
 // Texel `i` of a table, 256 texels a row (texels::ROW).

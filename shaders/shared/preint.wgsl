@@ -124,6 +124,34 @@ fn grid_average(sa: f32, sb: f32) -> vec4<f32> {
                vec4<f32>(0.0));
 }
 
+// The exact average in closed form instead (`preintegration = "analytic"`,
+// common/src/tf/closed.rs): between control points τ is linear and
+// k̃ = τ·c quadratic in s, so the average over [ua, ub] of a piece is
+// q0 + q1·(ua + ub) + q2·(ua² + ua·ub + ub²), with no difference of large
+// numbers; the segment's is Σ (ub − ua)·that over hi − lo. No table read: on
+// a CPU device a texture read is a gather per channel and lane, dearer than
+// these products. A segment shorter than ε is widened to ε about its
+// middle (the pieces reach ε past the data range), so that equal ends
+// have a width to divide by; ends are clamped to the range, as the tables
+// clamp them. ANALYTIC_PREINT, TF_PIECES and the pieces: bindings.wgsl.
+
+fn analytic_average(sa: f32, sb: f32) -> vec4<f32> {
+    let r = tf_pieces.range;
+    let a = clamp(sa, r.x, r.y);
+    let b = clamp(sb, r.x, r.y);
+    let widen = 0.5 * max(r.z - abs(b - a), 0.0);
+    let lo = min(a, b) - widen;
+    let hi = max(a, b) + widen;
+    var sum = vec4<f32>(0.0);
+    for (var i = 0u; i < TF_PIECES; i = i + 1u) {
+        let p = tf_pieces.piece[i];
+        let ua = clamp(lo - p.span.x, 0.0, p.span.y);
+        let ub = clamp(hi - p.span.x, 0.0, p.span.y);
+        sum = sum + (ub - ua) * (p.q0 + p.q1 * (ua + ub) + p.q2 * (ua * ua + ua * ub + ub * ub));
+    }
+    return max(sum / (hi - lo), vec4<f32>(0.0));
+}
+
 
 fn tf_end(s: f32) -> TfEnd {
     var e: TfEnd;

@@ -13,7 +13,9 @@ use crate::index::SpatialIndex;
 use crate::store::OctreeLayout;
 use anyhow::{bail, Result};
 use parallax_common::camera::{Placement, View, MAX_FRAME_PIXELS, MAX_VIEW_SIDE};
-use parallax_common::tf::{Channel, PreintLayout, PreintTable};
+use parallax_common::config::Preintegration;
+use parallax_common::tf::closed::{ClosedForm, GpuPieces, MAX_PIECES};
+use parallax_common::tf::{Channel, PreintLayout, PreintTable, TransferFunction};
 use parallax_common::tools::{EnhancerKind, MAX_ENHANCERS};
 pub use params::ToolParams;
 use params::{GpuFrame, GpuView};
@@ -52,6 +54,11 @@ pub struct TfTable {
     /// The 2D table (`preintegration = "2d"`), made when first asked for,
     /// and its nodes per axis.
     grid: Option<(wgpu::Texture, wgpu::TextureView, u32)>,
+    /// The DVR channels in closed form (`preintegration = "analytic"`),
+    /// where the function has few enough pieces, and the uniform the
+    /// kernel reads them from (zeros without).
+    closed: Option<ClosedForm>,
+    pieces: wgpu::Buffer,
     /// Which table this is (a bind group names one table).
     id: u64,
 }
@@ -104,7 +111,9 @@ fn over_smallest_bin(bins: &[f64], x: f64) -> f64 {
 }
 
 impl TfTable {
-    pub fn new(gpu: &Gpu, table: &PreintTable, max_importance: f64) -> Self {
+    /// The tables of `tf`, `table` its pre-integration table.
+    pub fn new(gpu: &Gpu, table: &PreintTable, tf: &TransferFunction) -> Self {
+        let max_importance = tf.max_importance();
         let (planar, layout) = table.gpu_layout();
         // Two interleaved parts with the same layout: (τ, k̃r, k̃g, k̃b), what
         // DVR reads, one 16-byte load per table entry; then (ι, ν, 0, 0),
@@ -150,6 +159,17 @@ impl TfTable {
                 let bins = table.level(ch, 0);
                 over_smallest_bin(bins, bins.iter().cloned().fold(0.0, f64::max)) <= END_RANGE
             });
+        let closed = ClosedForm::new(tf, table.vmin(), table.vmax());
+        let uniform: GpuPieces = closed
+            .as_ref()
+            .map_or([[0.0; 4]; 1 + 4 * MAX_PIECES], |c| c.gpu());
+        let pieces = gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("transfer function pieces"),
+                contents: bytemuck::cast_slice(&uniform),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
         TfTable {
             buffer,
             layout,
@@ -157,6 +177,8 @@ impl TfTable {
             end_path: end_allowed,
             end_allowed,
             grid: None,
+            closed,
+            pieces,
             aux_base,
             aux_prefix,
             max_importance: max_importance as f32,
@@ -238,6 +260,12 @@ impl TfTable {
         self.id = next_resource_id();
     }
 
+    /// Whether the DVR channels have a closed form the kernel can use
+    /// (`preintegration = "analytic"`; otherwise that falls back to "2d").
+    pub fn has_closed_form(&self) -> bool {
+        self.closed.is_some()
+    }
+
     /// Pre-integrates per segment even where the table allows the end path
     /// (`false`), or from the ends again where it allows it (`true`): the
     /// same integral by another sum, for comparisons.
@@ -284,9 +312,11 @@ pub struct RenderSettings {
     pub multilevel: Option<Multilevel>,
     /// Tricubic B-spline filtering (L12 §5.1) instead of trilinear.
     pub tricubic: bool,
-    /// Segment optics from the 2D pre-integration table, bilinearly (the
-    /// table must have been made: [`TfTable::build_grid`]).
-    pub preint_2d: bool,
+    /// How segment optics are looked up: the exact table (from the
+    /// segments' ends where it allows), the 2D table bilinearly (it must
+    /// have been made: [`TfTable::build_grid`]), or in closed form (where
+    /// the function has one, [`TfTable::has_closed_form`]; else as "2d").
+    pub preintegration: Preintegration,
     /// Run only the 8×8 tiles whose rays can meet data (`tiles`); off,
     /// every tile of every view.
     pub tile_culling: bool,
@@ -325,7 +355,7 @@ impl Default for RenderSettings {
             adaptive_step: false,
             multilevel: None,
             tricubic: false,
-            preint_2d: false,
+            preintegration: Preintegration::Exact,
             tile_culling: true,
             lookahead: true,
         }
@@ -379,7 +409,7 @@ pub struct Raycaster {
     /// One pipeline per combination of stepper, enhancers and shading that
     /// a frame has used (G10 §5: a kernel specialised for what the scene
     /// uses), built when first needed.
-    pipelines: HashMap<(KernelKey, [bool; 9]), wgpu::ComputePipeline>,
+    pipelines: HashMap<(KernelKey, [bool; 10], u32), wgpu::ComputePipeline>,
     /// The pool holds f32 values (else 8-bit codes).
     float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
@@ -593,6 +623,19 @@ pub enum Filtering {
     Exact,
 }
 
+fn uniform(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
 fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
@@ -671,16 +714,7 @@ impl Raycaster {
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("raycast"),
                 entries: &[
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 0,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Uniform,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
+                    uniform(0),
                     texels::layout_entry(1),
                     texture(3, wgpu::TextureViewDimension::D3, hw_filter),
                     texels::layout_entry(4),
@@ -688,20 +722,12 @@ impl Raycaster {
                     storage(6, false),
                     storage(7, false),
                     sampler(8, hw_filter),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 9,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Uniform,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
+                    uniform(9),
                     storage(10, false),
                     storage(11, false),
                     texture(12, wgpu::TextureViewDimension::D2, grid_filterable),
                     sampler(13, grid_filterable),
+                    uniform(14),
                 ],
             });
         let grid_sampler = make_sampler(gpu, "2D pre-integration table", grid_filterable);
@@ -748,11 +774,12 @@ impl Raycaster {
         &mut self,
         gpu: &Gpu,
         kernel: &KernelKey,
-        flags: [bool; 9],
+        flags: [bool; 10],
+        tf_pieces: u32,
     ) -> Result<&wgpu::ComputePipeline> {
-        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint, grid_preint, lookahead] =
+        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint, grid_preint, analytic_preint, lookahead] =
             flags;
-        let key = (kernel.clone(), flags);
+        let key = (kernel.clone(), flags, tf_pieces);
         if !self.pipelines.contains_key(&key) {
             let source = shader::kernel(kernel)?;
             let module = gpu.validated("shaders/raycast.wgsl", || {
@@ -774,10 +801,15 @@ impl Raycaster {
                 ("TRICUBIC", flag(tricubic)),
                 ("END_PREINT", flag(end_preint)),
                 ("GRID_PREINT", flag(grid_preint)),
+                ("ANALYTIC_PREINT", flag(analytic_preint)),
+                // The closed form's pieces: a constant, so that their loop
+                // unrolls (a pipeline per count, at most 17).
+                ("TF_PIECES", tf_pieces as f64),
                 // Sample values fetched one pass ahead (the kernel's
                 // LOOKAHEAD): set for float pools read with the 2D table,
                 // where the pool's wait for memory overlaps the table's
-                // fetch (docs/figures.md).
+                // fetch, or with the closed form, where it overlaps the
+                // arithmetic (docs/figures.md).
                 ("LOOKAHEAD", flag(lookahead)),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
@@ -987,6 +1019,10 @@ impl Raycaster {
                         binding: 13,
                         resource: wgpu::BindingResource::Sampler(&self.grid_sampler),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 14,
+                        resource: tf.pieces.as_entire_binding(),
+                    },
                 ],
             });
             self.frame.bind = Some((bind, tf.id, pool.id));
@@ -994,7 +1030,17 @@ impl Raycaster {
         }
         gpu.queue
             .write_buffer(&self.tools, 0, bytemuck::cast_slice(&settings.tools));
-        let grid = settings.preint_2d && self.grid_filterable && !k.iso && tf.grid.is_some();
+        let analytic = settings.preintegration == Preintegration::Analytic && !k.iso;
+        let closed = analytic && tf.closed.is_some();
+        let grid = !closed
+            && (analytic || settings.preintegration == Preintegration::TwoD)
+            && self.grid_filterable
+            && !k.iso
+            && tf.grid.is_some();
+        let tf_pieces = match (&tf.closed, closed) {
+            (Some(c), true) => c.pieces.len() as u32,
+            _ => 0,
+        };
         let pipeline = self
             .pipeline(
                 gpu,
@@ -1006,10 +1052,12 @@ impl Raycaster {
                     settings.count_samples,
                     settings.multilevel.is_some() && !k.iso,
                     settings.tricubic,
-                    tf.end_path && !grid,
+                    tf.end_path && !grid && !closed,
                     grid,
-                    settings.lookahead && self.float_pool && grid,
+                    closed,
+                    settings.lookahead && self.float_pool && (grid || closed),
                 ],
+                tf_pieces,
             )?
             .clone();
         let fr = &self.frame;

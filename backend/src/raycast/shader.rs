@@ -83,6 +83,8 @@ pub const OVERRIDES: &[&str] = &[
     "TRICUBIC",
     "END_PREINT",
     "GRID_PREINT",
+    "ANALYTIC_PREINT",
+    "TF_PIECES",
     "LOOKAHEAD",
 ];
 
@@ -338,15 +340,33 @@ mod tests {
             // The override combinations of the plain and the fullest
             // kernels: every combination of all but the last, which takes
             // the parity of the others' values, so that it meets both
-            // values of every other override and every pair of them.
+            // values of every other override and every pair of them. The
+            // three pre-integration paths, of which a pipeline sets at most
+            // one, count as one override of four values (two bits), and
+            // TF_PIECES, a count, takes its largest value (the whole
+            // uniform array).
+            const PATHS: [&str; 3] = ["END_PREINT", "GRID_PREINT", "ANALYTIC_PREINT"];
             if key.enhancers.len() == MAX_ENHANCERS || key.enhancers.is_empty() {
-                let n = OVERRIDES.len() - 1;
+                let flags: Vec<&str> = OVERRIDES
+                    .iter()
+                    .copied()
+                    .filter(|n| *n != "TF_PIECES" && !PATHS.contains(n))
+                    .collect();
+                // The path's two bits come first, then the flags.
+                let n = 2 + flags.len() - 1;
                 for bits in 0..1u32 << n {
                     let mut constants = naga::back::PipelineConstants::default();
                     let bits = bits | (bits.count_ones() & 1) << n;
-                    for (i, n) in OVERRIDES.iter().enumerate() {
-                        constants.insert(n.to_string(), ((bits >> i) & 1) as f64);
+                    for (i, p) in PATHS.iter().enumerate() {
+                        constants.insert(p.to_string(), f64::from(bits & 3 == i as u32 + 1));
                     }
+                    for (i, f) in flags.iter().enumerate() {
+                        constants.insert(f.to_string(), ((bits >> (i + 2)) & 1) as f64);
+                    }
+                    constants.insert(
+                        "TF_PIECES".to_string(),
+                        parallax_common::tf::closed::MAX_PIECES as f64,
+                    );
                     let (m, _) = naga::back::pipeline_constants::process_overrides(
                         &module,
                         &info,
@@ -455,5 +475,12 @@ mod tests {
         );
         check!("IndexNode", IndexNode, [tree, data, range, nx, ny, nz]);
         check!("ToolParams", ToolParams, [a, b, c, d]);
+        // The closed form's uniform: its header and MAX_PIECES pieces.
+        let (span, _) = layout("TfPieces");
+        assert_eq!(
+            span as usize,
+            size_of::<parallax_common::tf::closed::GpuPieces>(),
+            "TfPieces size"
+        );
     }
 }

@@ -12,6 +12,9 @@
 //!   averages keep full relative precision for any extinction range.
 //! * [`alpha`], [`premultiplied_color`]: the step opacity α = 1 − exp(−τ̄·d)
 //!   and opacity-weighted colour k̃̄/τ̄·α, stable for tiny and huge τ̄·d.
+//! * [`closed::ClosedForm`]: the same averages of τ and k̃ in closed form,
+//!   from a few coefficients per piece between control points, for the
+//!   kernel's `preintegration = "analytic"`.
 //! * [`EmptinessTable`]: integer prefix counts that answer "is τ ≡ 0 on
 //!   [min, max]?" conservatively, for empty-space skipping.
 //! * [`presets`]: ParaView colour-map presets and 3D Slicer volume-property
@@ -19,6 +22,7 @@
 //!   functions (VTK opacity per unit distance → extinction) and written as
 //!   TOML.
 
+pub mod closed;
 mod empty;
 mod function;
 mod preint;

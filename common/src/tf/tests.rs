@@ -993,3 +993,134 @@ fn preint_emission_is_exact_between_integer_control_points() {
     }
     assert!((table.average(Channel::EmissionR, 150.0, 151.0) - 1.0).abs() < 1e-12);
 }
+
+// ---------------------------------------------------------------- closed form
+
+/// ∫ of (τ, k̃) over [lo, hi] exactly: between control points f is a
+/// quadratic, integrated exactly by Milne's open rule (interior points
+/// only, so a step at an end does not enter).
+fn exact_dvr_integral(tf: &TransferFunction, lo: f64, hi: f64) -> [f64; 4] {
+    let mut cuts = vec![lo];
+    cuts.extend(
+        tf.control_values()
+            .into_iter()
+            .filter(|&x| x > lo && x < hi),
+    );
+    cuts.push(hi);
+    let f = |x: f64| {
+        let o = tf.eval(x);
+        [o.tau, o.emission[0], o.emission[1], o.emission[2]]
+    };
+    let mut sum = [0.0; 4];
+    for w in cuts.windows(2) {
+        let (p, h) = (w[0], w[1] - w[0]);
+        let (a, b, c) = (f(p + 0.25 * h), f(p + 0.5 * h), f(p + 0.75 * h));
+        for k in 0..4 {
+            sum[k] += h / 3.0 * (2.0 * a[k] - b[k] + 2.0 * c[k]);
+        }
+    }
+    sum
+}
+
+/// The closed form's averages against the exact integral of the transfer
+/// function, over random segments (some short, some of zero length, some
+/// reaching past the range), relative to the channel's largest value. Ends
+/// beyond the range are clamped to it, as the kernel clamps every sample
+/// value.
+fn closed_matches_exact(tf: &TransferFunction, vmin: f64, vmax: f64, seed: u64) {
+    let cf = closed::ClosedForm::new(tf, vmin, vmax).expect("few pieces");
+    let scale: Vec<f64> = (0..4)
+        .map(|c| {
+            (0..=1000)
+                .map(|i| {
+                    let o = tf.eval(vmin + (vmax - vmin) * i as f64 / 1000.0);
+                    [o.tau, o.emission[0], o.emission[1], o.emission[2]][c]
+                })
+                .fold(0.0, f64::max)
+                .max(1e-300)
+        })
+        .collect();
+    let mut rng = Lcg(seed);
+    let span = vmax - vmin;
+    for i in 0..2000 {
+        let a = rng.range(vmin - 0.1 * span, vmax + 0.1 * span);
+        let b = match i % 4 {
+            0 => a + rng.range(-1e-3, 1e-3) * span,
+            1 => a,
+            _ => rng.range(vmin - 0.1 * span, vmax + 0.1 * span),
+        };
+        let got = cf.average(a, b);
+        let (lo, hi) = (a.min(b).clamp(vmin, vmax), a.max(b).clamp(vmin, vmax));
+        let short = hi - lo < cf.eps;
+        let want = if short {
+            // Widened to eps about the middle: the function there, to
+            // within its change over eps.
+            let o = tf.eval(0.5 * (lo + hi));
+            [o.tau, o.emission[0], o.emission[1], o.emission[2]]
+        } else {
+            exact_dvr_integral(tf, lo, hi).map(|x| x / (hi - lo))
+        };
+        let slack = if short { 1e-3 } else { 1e-9 };
+        for c in 0..4 {
+            assert!(
+                got[c].is_finite() && got[c] >= 0.0,
+                "channel {c} on [{a}, {b}]: {}",
+                got[c]
+            );
+            assert!(
+                (got[c] - want[c]).abs() <= slack * scale[c],
+                "channel {c} on [{a}, {b}]: closed form {:e}, exact {:e}",
+                got[c],
+                want[c]
+            );
+        }
+    }
+}
+
+/// configs/tf/colin27-brain.toml.
+fn brain_tf() -> TransferFunction {
+    TransferFunction::from_points(vec![
+        ControlPoint::new(0.0, [0.0, 0.0, 0.0], 0.0),
+        ControlPoint::new(25.0, [0.2, 0.3, 0.6], 0.0),
+        ControlPoint::new(75.0, [0.9, 0.45, 0.35], 0.02),
+        ControlPoint::new(105.0, [1.0, 0.95, 0.8], 0.12),
+        ControlPoint::new(125.0, [1.0, 0.95, 0.8], 0.01),
+        ControlPoint::new(255.0, [1.0, 0.8, 0.5], 0.01),
+    ])
+    .unwrap()
+}
+
+#[test]
+fn closed_form_matches_the_exact_integral() {
+    closed_matches_exact(&brain_tf(), 0.0, 255.0, 1);
+    // Steps (equal values), a τ = 0 end, and data beyond the last point.
+    closed_matches_exact(&step_tf(), -5.0, 30.0, 2);
+    // Data inside the points only, a τ ≡ 0 piece first.
+    closed_matches_exact(&ramp_tf(), 10.0, 70.25, 3);
+    // Extinction 1e-6 beside 1e6 on a piece one value wide.
+    closed_matches_exact(&huge_range_tf(), 0.0, 200.0, 4);
+}
+#[test]
+fn closed_form_leaves_out_empty_pieces_and_declines_what_it_cannot_hold() {
+    let cf = closed::ClosedForm::new(&brain_tf(), 0.0, 255.0).unwrap();
+    // [0, 25] has τ ≡ 0; [25, 75], [75, 105], [105, 125] and [125, 255]
+    // remain, the last going on by eps past the range.
+    assert_eq!(cf.pieces.len(), 4, "{:?}", cf.pieces);
+    assert!(cf.pieces[0].start == 25.0 && cf.pieces[0].width == 50.0);
+    assert_eq!(cf.pieces[3].start + cf.pieces[3].width, 255.0 + cf.eps);
+    assert_eq!(cf.gpu()[0][3], 4.0);
+    // 41 points: more pieces than the kernel holds.
+    assert!(closed::ClosedForm::new(&smooth_tf(), -1000.0, 3000.0).is_none());
+    // An extinction near the cap over a sliver: too large for f32 sums.
+    let huge = TransferFunction::from_points(vec![
+        ControlPoint::new(0.0, [1.0; 3], 0.0),
+        ControlPoint::new(1e-9, [1.0; 3], MAX_EXTINCTION),
+    ])
+    .unwrap();
+    assert!(closed::ClosedForm::new(&huge, 0.0, 1.0).is_none());
+    // τ ≡ 0: no pieces, every average 0.
+    let clear = TransferFunction::from_points(vec![ControlPoint::new(0.0, [1.0; 3], 0.0)]).unwrap();
+    let cf = closed::ClosedForm::new(&clear, 0.0, 1.0).unwrap();
+    assert!(cf.pieces.is_empty());
+    assert_eq!(cf.average(0.2, 0.7), [0.0; 4]);
+}
