@@ -738,11 +738,11 @@ def fmt(x, spec):
 # brick encodings, early termination matched and off, VTK as it comes too),
 # then an opaque view and a CT that is mostly air (8-bit bricks, early
 # termination matched, VTK on Parallax's domain).
-# `preint`: the ladders' render.preintegration. The closed form against the
-# 2D table, one process each (python3 bench/settings_rounds.py, docs/
-# figures.md "The exact integral in closed form"): the brain (4 pieces)
-# 0.87 of the time at 5 mm, the skin (2) 0.93 at 4 mm; the CT (13) 1.11 at
-# 5 mm and 0.99 at 0.88 mm.
+# `preint`: the ladders' render.preintegration. The closed form's time
+# over the 2D table's at the partners of VTK's settings (bench/
+# settings_closed_form_{brain,skin,ct}.csv, docs/figures.md "The exact
+# integral in closed form"): the brain (4 pieces) 0.86–0.91, the skin (2)
+# 0.87; the CT (12) 0.96 at 0.88 mm but 1.24 at 5 mm.
 CASES = [
     dict(name="colin27-brain", title="Colin27 MRI, translucent brain", volume="colin27",
          tf="../configs/tf/colin27-brain.toml", full=True, preint="analytic"),

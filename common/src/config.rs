@@ -136,8 +136,9 @@ pub struct RenderConfig {
     /// pieces between control points (common/src/tf/closed.rs), no table
     /// read. Its cost grows with the pieces where τ > 0: on a CPU device,
     /// where a texture read is a gather per channel and lane, it beats
-    /// "2d" for a few (the Colin27 brain's 4: 0.87 of the frame time) and
-    /// loses for many (the CT-Bone preset's 12: 1.3), docs/figures.md. A
+    /// "2d" for a few (the Colin27 brain's 4: 0.86–0.91 of the frame time)
+    /// and may lose for many (the CT-Bone preset's 12: 0.96 at a fine
+    /// step, 1.24 at a coarse one), docs/figures.md. A
     /// function with more than 16 such pieces over the data range (or
     /// extinctions too large for f32 sums) is looked up as with "2d".
     #[serde(default = "exact")]
