@@ -13,7 +13,7 @@ use crate::reconstruct::{subframe_of, ViewHistory, SUBFRAMES};
 use crate::store::{BrickEncoding, NodeKey, OctreeDb};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{Filter, Interpolation, Mode, Preintegration, RenderConfig, Shading};
+use parallax_common::config::{Filter, Interpolation, Mode, RenderConfig, Shading};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::tools::{Tool, MAX_ENHANCERS};
@@ -366,15 +366,8 @@ impl Renderer {
         cfg: &RenderConfig,
     ) -> Result<Frame> {
         let start = Instant::now();
-        // The 2D table, for "2d" and for "analytic" where the function has
-        // no closed form the kernel can use.
         if let Some(tf) = self.tf.as_mut() {
-            let grid = match cfg.preintegration {
-                Preintegration::TwoD => true,
-                Preintegration::Analytic => !tf.table.has_closed_form(),
-                Preintegration::Exact => false,
-            };
-            if grid {
+            if tf.table.wants_grid(cfg.preintegration) {
                 tf.table.build_grid(&self.gpu, &tf.preint);
             }
         }

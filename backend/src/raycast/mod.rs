@@ -54,10 +54,10 @@ pub struct TfTable {
     /// The 2D table (`preintegration = "2d"`), made when first asked for,
     /// and its nodes per axis.
     grid: Option<(wgpu::Texture, wgpu::TextureView, u32)>,
-    /// The DVR channels in closed form (`preintegration = "analytic"`),
-    /// where the function has few enough pieces, and the uniform the
-    /// kernel reads them from (zeros without).
-    closed: Option<ClosedForm>,
+    /// How many pieces the DVR channels' closed form has
+    /// (`preintegration = "analytic"`), where the function has one, and the
+    /// uniform the kernel reads them from (zeros without).
+    closed_pieces: Option<u32>,
     pieces: wgpu::Buffer,
     /// Which table this is (a bind group names one table).
     id: u64,
@@ -177,7 +177,7 @@ impl TfTable {
             end_path: end_allowed,
             end_allowed,
             grid: None,
-            closed,
+            closed_pieces: closed.map(|c| c.pieces.len() as u32),
             pieces,
             aux_base,
             aux_prefix,
@@ -263,7 +263,17 @@ impl TfTable {
     /// Whether the DVR channels have a closed form the kernel can use
     /// (`preintegration = "analytic"`; otherwise that falls back to "2d").
     pub fn has_closed_form(&self) -> bool {
-        self.closed.is_some()
+        self.closed_pieces.is_some()
+    }
+
+    /// Whether `preintegration` reads the 2D table ([`Self::build_grid`]):
+    /// "2d", and "analytic" where the function has no closed form.
+    pub fn wants_grid(&self, preintegration: Preintegration) -> bool {
+        match preintegration {
+            Preintegration::TwoD => true,
+            Preintegration::Analytic => !self.has_closed_form(),
+            Preintegration::Exact => false,
+        }
     }
 
     /// Pre-integrates per segment even where the table allows the end path
@@ -1030,17 +1040,16 @@ impl Raycaster {
         }
         gpu.queue
             .write_buffer(&self.tools, 0, bytemuck::cast_slice(&settings.tools));
-        let analytic = settings.preintegration == Preintegration::Analytic && !k.iso;
-        let closed = analytic && tf.closed.is_some();
-        let grid = !closed
-            && (analytic || settings.preintegration == Preintegration::TwoD)
+        // The closed form's pieces where the kernel uses it, else the 2D
+        // table where asked for and filterable, else the exact table.
+        let closed_pieces = tf
+            .closed_pieces
+            .filter(|_| settings.preintegration == Preintegration::Analytic && !k.iso);
+        let closed = closed_pieces.is_some();
+        let grid = tf.wants_grid(settings.preintegration)
             && self.grid_filterable
             && !k.iso
             && tf.grid.is_some();
-        let tf_pieces = match (&tf.closed, closed) {
-            (Some(c), true) => c.pieces.len() as u32,
-            _ => 0,
-        };
         let pipeline = self
             .pipeline(
                 gpu,
@@ -1057,7 +1066,7 @@ impl Raycaster {
                     closed,
                     settings.lookahead && self.float_pool && (grid || closed),
                 ],
-                tf_pieces,
+                closed_pieces.unwrap_or(0),
             )?
             .clone();
         let fr = &self.frame;

@@ -26,7 +26,7 @@
 //! out. Beyond the first and last point the function is constant: where the
 //! data range reaches past them, a constant piece covers the rest.
 
-use super::function::TransferFunction;
+use super::function::{ControlPoint, TransferFunction};
 
 /// The most pieces the kernel integrates (its uniform's size); a function
 /// with more, over the data range, is looked up in a table instead.
@@ -178,20 +178,19 @@ fn pieces(tf: &TransferFunction, vmin: f64, vmax: f64) -> Option<Vec<Piece>> {
             out.push(p);
         }
     };
-    let constant = |start: f64, end: f64, tau: f64, color: [f64; 3]| Piece {
-        start,
-        width: end - start,
-        q0: [tau, tau * color[0], tau * color[1], tau * color[2]],
-        q1: [0.0; 4],
-        q2: [0.0; 4],
+    // Beyond an end point the function is that point's, constant.
+    let constant = |start: f64, end: f64, p: &ControlPoint| {
+        let c = p.color.map(|c| p.extinction * c);
+        Piece {
+            start,
+            width: end - start,
+            q0: [p.extinction, c[0], c[1], c[2]],
+            q1: [0.0; 4],
+            q2: [0.0; 4],
+        }
     };
     if vmin < first.value {
-        push(constant(
-            vmin,
-            first.value.min(vmax),
-            first.extinction,
-            first.color,
-        ));
+        push(constant(vmin, first.value.min(vmax), first));
     }
     for w in pts.windows(2) {
         let (p, n) = (&w[0], &w[1]);
@@ -224,12 +223,7 @@ fn pieces(tf: &TransferFunction, vmin: f64, vmax: f64) -> Option<Vec<Piece>> {
         push(piece);
     }
     if vmax > last.value {
-        push(constant(
-            last.value.max(vmin),
-            vmax,
-            last.extinction,
-            last.color,
-        ));
+        push(constant(last.value.max(vmin), vmax, last));
     }
     // Each coefficient, each term of the average (|q1|·w, |q2|·w²) and of
     // the integral (times w again) within MAX_TERM.

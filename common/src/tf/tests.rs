@@ -1029,17 +1029,17 @@ fn exact_dvr_integral(tf: &TransferFunction, lo: f64, hi: f64) -> [f64; 4] {
 /// value.
 fn closed_matches_exact(tf: &TransferFunction, vmin: f64, vmax: f64, seed: u64) {
     let cf = closed::ClosedForm::new(tf, vmin, vmax).expect("few pieces");
-    let scale: Vec<f64> = (0..4)
-        .map(|c| {
-            (0..=1000)
-                .map(|i| {
-                    let o = tf.eval(vmin + (vmax - vmin) * i as f64 / 1000.0);
-                    [o.tau, o.emission[0], o.emission[1], o.emission[2]][c]
-                })
-                .fold(0.0, f64::max)
-                .max(1e-300)
-        })
-        .collect();
+    // Each channel's largest value over the range.
+    let mut scale = [1e-300f64; 4];
+    for i in 0..=1000 {
+        let o = tf.eval(vmin + (vmax - vmin) * i as f64 / 1000.0);
+        for (m, v) in scale
+            .iter_mut()
+            .zip([o.tau, o.emission[0], o.emission[1], o.emission[2]])
+        {
+            *m = m.max(v);
+        }
+    }
     let mut rng = Lcg(seed);
     let span = vmax - vmin;
     for i in 0..2000 {
@@ -1077,16 +1077,12 @@ fn closed_matches_exact(tf: &TransferFunction, vmin: f64, vmax: f64, seed: u64) 
     }
 }
 
-/// configs/tf/colin27-brain.toml.
+/// The translucent brain of the VTK comparison.
 fn brain_tf() -> TransferFunction {
-    TransferFunction::from_points(vec![
-        ControlPoint::new(0.0, [0.0, 0.0, 0.0], 0.0),
-        ControlPoint::new(25.0, [0.2, 0.3, 0.6], 0.0),
-        ControlPoint::new(75.0, [0.9, 0.45, 0.35], 0.02),
-        ControlPoint::new(105.0, [1.0, 0.95, 0.8], 0.12),
-        ControlPoint::new(125.0, [1.0, 0.95, 0.8], 0.01),
-        ControlPoint::new(255.0, [1.0, 0.8, 0.5], 0.01),
-    ])
+    TransferFunction::load(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../configs/tf/colin27-brain.toml"
+    ))
     .unwrap()
 }
 
