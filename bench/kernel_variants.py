@@ -269,16 +269,23 @@ def log_rounds(rows, name, ratio, against):
                f"{row[ratio]:8.3f}  ({row['runs_ms']})")
 
 
-def main():
+def variant_arguments(doc, default_csv, variants):
+    """The rounds' arguments and --only: (args, out, parallax, the variants
+    to run, "base" first)."""
     def only(ap):
         ap.add_argument("--only", help="the variants to run, comma-separated (the base always runs)")
-    a, out, px = rounds_arguments(__doc__, "kernel_variants.csv", only)
-    names = list(VARIANTS)
+    a, out, px = rounds_arguments(doc, default_csv, only)
+    names = list(variants)
     if a.only:
         names = ["base"] + [n for n in a.only.split(",") if n and n != "base"]
     for n in names:
-        if n not in VARIANTS:
-            sys.exit(f"--only: no variant {n!r} (there are {', '.join(VARIANTS)})")
+        if n not in variants:
+            sys.exit(f"--only: no variant {n!r} (there are {', '.join(variants)})")
+    return a, out, px, names
+
+
+def main():
+    a, out, px, names = variant_arguments(__doc__, "kernel_variants.csv", VARIANTS)
     ref_path = out / f"{CASE}-reference.npy"
     dbs = {k: out / f"colin27-{k}.pxo" for k in ["full", "full-b64", "full-b128"]}
     if not dbs["full-b64"].exists() or not ref_path.exists():

@@ -43,8 +43,8 @@ on a finer ladder of steps (TABLE_STEPS), early termination matched; and the sam
 from a database imported with bricks of 64 voxels instead of 32 (`parallax
 import --brick 64`: half as many leaves along a ray, so less traversal per
 ray; the finest level is the same data) on the coarser steps
-(BIG_BRICK_STEPS), where that cost weighs most. Where a case's bricks are 8-bit, both ladders run on
-full-precision bricks too. A third ladder draws the full-precision bricks
+(BIG_BRICK_STEPS), where that cost weighs most. Both ladders run on
+8-bit and on full-precision bricks. A third ladder draws the full-precision bricks
 of 64 one level of detail coarser (render.accuracy = 6: level 1, 2 mm
 voxels, on every case's view; COARSE_STEPS). Then, for each VTK setting,
 the ladder that holds its partner is bisected twice (REFINE) between its
@@ -939,18 +939,20 @@ def run_case(case, a, px, out, volume):
                 rows.append(parallax_row(name, f"{bricks} bricks", s, et, st, rmse, mx, psnr,
                                          (run, dbs[bricks], dict(step_factor=s, early_termination=et))))
 
-    # The ladders, by label: on the case's bricks, and where those are
-    # 8-bit on full-precision bricks too (a float pool read with the 2D
-    # table or the closed form fetches each sample a pass ahead, LOOKAHEAD;
-    # on a CPU device that made the skin at 1 mm with the 2D table take
-    # 0.84 of the 8-bit pool's time, bench/settings_skin.csv); and level 1 of the float bricks of
-    # 64, where a case's error allows it (the opaque skin at VTK's coarser
-    # steps: half the leaves and a shorter descent per ray,
+    # The ladders, by label: on 8-bit and on full-precision bricks (a float
+    # pool read with the 2D table or the closed form fetches each sample a
+    # pass ahead, LOOKAHEAD; on a CPU device that made the skin at 1 mm with
+    # the 2D table take 0.84 of the 8-bit pool's time,
+    # bench/settings_skin.csv, while on a Zen 5 the brain's 8-bit bricks of
+    # 64 in closed form took 0.95 of the float pool's,
+    # bench/kernel_variants_closed_memory.csv); and level 1 of the float
+    # bricks of 64, where a case's error allows it (the opaque skin at
+    # VTK's coarser steps: half the leaves and a shorter descent per ray,
     # docs/figures.md).
     preint = case["preint"]
     label = PREINT_LABELS[preint]
     ladders = {}
-    for kind in ["full"] if case["full"] else ["8-bit", "full"]:
+    for kind in ["8-bit", "full"]:
         ladders[f"{kind} bricks, {label}"] = Ladder(kind, TABLE_STEPS)
         ladders[f"{kind} bricks of 64, {label}"] = Ladder(f"{kind}-b64", BIG_BRICK_STEPS)
     ladders[f"full bricks of 64, {label}, level 1"] = Ladder(

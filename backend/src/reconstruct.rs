@@ -50,6 +50,8 @@ pub fn in_subframe(x: u32, y: u32, k: u32) -> bool {
     x % 2 == ox && y % 2 == oy
 }
 
+use rayon::prelude::*;
+
 type Rgba = [f32; 4];
 
 /// One reconstruction phase: the quad offsets of its pixels, and their four
@@ -74,9 +76,10 @@ fn mean(a: &Rgba, b: &Rgba) -> Rgba {
 pub struct ViewHistory {
     width: u32,
     height: u32,
-    /// Each pixel's most recent rendering, and the one before it.
+    /// Each pixel's most recent rendering, and the colour change from the
+    /// one before it (valid once `renders` is 2).
     last: Vec<Rgba>,
-    prev: Vec<Rgba>,
+    change: Vec<f32>,
     /// Renderings since the history was last invalidated (saturating at 2).
     renders: Vec<u8>,
 }
@@ -88,7 +91,7 @@ impl ViewHistory {
             width,
             height,
             last: vec![[0.0; 4]; n],
-            prev: vec![[0.0; 4]; n],
+            change: vec![0.0; n],
             renders: vec![0; n],
         }
     }
@@ -114,21 +117,13 @@ impl ViewHistory {
             for x in (ox..w).step_by(2) {
                 let i = y * w + x;
                 if self.renders[i] > 0 {
-                    self.prev[i] = self.last[i];
+                    self.change[i] = diff(&rendered[i], &self.last[i]);
                 }
                 self.last[i] = rendered[i];
                 self.renders[i] = (self.renders[i] + 1).min(2);
                 out[i] = rendered[i];
             }
         }
-        // The change between a pixel's two latest renderings.
-        let change = |hist: &ViewHistory, i: usize| -> f32 {
-            if hist.renders[i] >= 2 {
-                diff(&hist.last[i], &hist.prev[i])
-            } else {
-                0.0
-            }
-        };
         let phases: [Phase; 2] = [
             // Diagonal to the rendered pixels, from the four diagonal ones.
             (&[(ox ^ 1, oy ^ 1)], [[-1, -1], [1, 1], [1, -1], [-1, 1]]),
@@ -138,58 +133,86 @@ impl ViewHistory {
                 [[-1, 0], [1, 0], [0, -1], [0, 1]],
             ),
         ];
+        // A pixel of a phase reads only rendered pixels and those of the
+        // phases before, never one of its own: each phase's rows are
+        // filtered in parallel and written after, the same image as in
+        // raster order.
         for &(starts, nb) in &phases {
             for &(sx, sy) in starts {
-                for y in (sy..h).step_by(2) {
-                    for x in (sx..w).step_by(2) {
-                        let i = y * w + x;
-                        let at = |d: [isize; 2]| -> Option<usize> {
-                            let (nx, ny) = (x as isize + d[0], y as isize + d[1]);
-                            (nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h)
-                                .then(|| ny as usize * w + nx as usize)
-                        };
-                        let n: [Option<usize>; 4] = nb.map(at);
-                        // Opposite pairs: (0, 1) and (2, 3).
-                        let pair = |a: Option<usize>, b: Option<usize>| match (a, b) {
-                            (Some(a), Some(b)) => {
-                                Some((mean(&out[a], &out[b]), diff(&out[a], &out[b])))
-                            }
-                            (Some(a), None) | (None, Some(a)) => Some((out[a], f32::INFINITY)),
-                            (None, None) => None,
-                        };
-                        let spatial = match (pair(n[0], n[1]), pair(n[2], n[3])) {
-                            (Some((p, dp)), Some((q, dq))) => {
-                                if dq < dp {
-                                    q
-                                } else {
-                                    p
-                                }
-                            }
-                            (Some((p, _)), None) | (None, Some((p, _))) => p,
-                            // A 1-pixel image side: nothing around.
-                            (None, None) => self.last[i],
-                        };
-                        out[i] = if self.renders[i] == 0 {
-                            spatial
-                        } else {
-                            let dq = n
-                                .iter()
-                                .flatten()
-                                .map(|&j| change(self, j))
-                                .fold(0.0, f32::max);
-                            let s = smoothstep(dq, DELTA_LOW, DELTA_HIGH);
-                            let q = self.last[i];
-                            if s == 0.0 {
-                                q
-                            } else {
-                                std::array::from_fn(|c| q[c] + s * (spatial[c] - q[c]))
-                            }
-                        };
+                let rows: Vec<Vec<Rgba>> = (sy..h)
+                    .step_by(2)
+                    .collect::<Vec<_>>()
+                    .into_par_iter()
+                    .map(|y| {
+                        (sx..w)
+                            .step_by(2)
+                            .map(|x| self.filtered(&out, x, y, nb))
+                            .collect()
+                    })
+                    .collect();
+                for (y, row) in (sy..h).step_by(2).zip(rows) {
+                    for (x, q) in (sx..w).step_by(2).zip(row) {
+                        out[y * w + x] = q;
                     }
                 }
             }
         }
         out
+    }
+
+    /// The change between pixel `i`'s two latest renderings.
+    fn change(&self, i: usize) -> f32 {
+        if self.renders[i] >= 2 {
+            self.change[i]
+        } else {
+            0.0
+        }
+    }
+
+    /// Pixel (x, y), not rendered this frame, from its neighbours `nb`
+    /// (two opposite pairs) in `out` and its own history.
+    fn filtered(&self, out: &[Rgba], x: usize, y: usize, nb: [[isize; 2]; 4]) -> Rgba {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let i = y * w + x;
+        let at = |d: [isize; 2]| -> Option<usize> {
+            let (nx, ny) = (x as isize + d[0], y as isize + d[1]);
+            (nx >= 0 && ny >= 0 && (nx as usize) < w && (ny as usize) < h)
+                .then(|| ny as usize * w + nx as usize)
+        };
+        let n: [Option<usize>; 4] = nb.map(at);
+        // Opposite pairs: (0, 1) and (2, 3).
+        let pair = |a: Option<usize>, b: Option<usize>| match (a, b) {
+            (Some(a), Some(b)) => Some((mean(&out[a], &out[b]), diff(&out[a], &out[b]))),
+            (Some(a), None) | (None, Some(a)) => Some((out[a], f32::INFINITY)),
+            (None, None) => None,
+        };
+        let spatial = match (pair(n[0], n[1]), pair(n[2], n[3])) {
+            (Some((p, dp)), Some((q, dq))) => {
+                if dq < dp {
+                    q
+                } else {
+                    p
+                }
+            }
+            (Some((p, _)), None) | (None, Some((p, _))) => p,
+            // A 1-pixel image side: nothing around.
+            (None, None) => self.last[i],
+        };
+        if self.renders[i] == 0 {
+            return spatial;
+        }
+        let dq = n
+            .iter()
+            .flatten()
+            .map(|&j| self.change(j))
+            .fold(0.0, f32::max);
+        let s = smoothstep(dq, DELTA_LOW, DELTA_HIGH);
+        let q = self.last[i];
+        if s == 0.0 {
+            q
+        } else {
+            std::array::from_fn(|c| q[c] + s * (spatial[c] - q[c]))
+        }
     }
 }
 

@@ -552,7 +552,7 @@ impl Renderer {
         let images = if cfg.reconstruction {
             let t = Instant::now();
             let images = self.reconstruct(frame, placement, views, cfg, out.images);
-            stats.output_ms += ms(t);
+            stats.reconstruct_ms = ms(t);
             images
         } else {
             self.history.clear();

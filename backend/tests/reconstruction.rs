@@ -77,6 +77,9 @@ fn a_static_view_becomes_the_full_render_and_a_rotation_stays_close() {
         let p = placement(1.0 + f as f64);
         let a = full.frame(f, &p, &views, &full_cfg).unwrap();
         let b = r.frame(4 + f, &p, &views, &cfg).unwrap();
+        // The filter's time is its own stage, and only with reconstruction.
+        assert_eq!(a.stats.reconstruct_ms, 0.0);
+        assert!(b.stats.reconstruct_ms > 0.0 && b.stats.reconstruct_ms < b.stats.total_ms);
         let q = psnr(&b.images[0], &a.images[0]);
         worst = worst.min(q);
         sum += q;

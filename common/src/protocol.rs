@@ -93,6 +93,9 @@ pub struct FrameStats {
     pub upload_ms: f64,
     pub index_ms: f64,
     pub render_ms: f64,
+    /// Frame reconstruction's filter (G10 §5), zero without it.
+    pub reconstruct_ms: f64,
+    /// Writing the images (PNG, .npy) and the streamed copies.
     pub output_ms: f64,
     pub total_ms: f64,
     /// Bricks: nodes in the cut, leaves with data, resident in the GPU pool,
