@@ -174,9 +174,6 @@ pub fn eye_view(
     }
     let res = simulate::default_resolution(display, EYE_VIEW_MAX_SIDE);
     let img = simulate::simulate(display, &linear, eye, res)?;
-    let rgb = img
-        .iter()
-        .flat_map(|p| [p[0], p[1], p[2]].map(parallax_backend::output::srgb8))
-        .collect();
+    let rgb = parallax_backend::output::rgb8(&img);
     Ok((res[0], res[1], rgb))
 }

@@ -224,10 +224,7 @@ fn render_frame(s: &mut Setup, state: &FrameState) -> Result<FrameStats> {
                 projector: pi as u32,
                 width,
                 height,
-                rgb8: img
-                    .iter()
-                    .flat_map(|p| [p[0], p[1], p[2]].map(output::srgb8))
-                    .collect(),
+                rgb8: output::rgb8(img),
             });
         }
     }
