@@ -49,9 +49,14 @@ pub struct Renderer {
     /// (G10 §5), or one per sub-frame with frame reconstruction.
     last: VecDeque<(SpatialIndex, Vec<u32>)>,
     /// Frame reconstruction: each view's history, and what it was made
-    /// under (a change of any of it invalidates the history).
+    /// under (a change of any of it invalidates the history). With the
+    /// filter on the GPU the history lives there and `history` is empty.
     history: Vec<ViewHistory>,
     history_key: Option<HistoryKey>,
+    /// Run frame reconstruction's filter on the GPU, after the rays and
+    /// before the read-back (`raycast::subframes`); off, on the CPU after
+    /// the read-back ([`ViewHistory`]). The same filter either way.
+    pub reconstruct_on_gpu: bool,
     /// The stored bricks' smallest and largest variance (B10 §4.5).
     variance_range: (f32, f32),
     /// Prediction buffer: what it was filled under, and frames since the
@@ -167,6 +172,7 @@ impl Renderer {
             last: VecDeque::new(),
             history: Vec::new(),
             history_key: None,
+            reconstruct_on_gpu: true,
             variance_range,
             prediction: None,
             tools: (0, Vec::new()),
@@ -306,6 +312,7 @@ impl Renderer {
             }
         }
         RenderSettings {
+            reconstruct: None,
             step_factor: cfg.step_factor as f32,
             early_termination: cfg.early_termination as f32,
             shading: cfg.shading == Shading::Phong,
@@ -476,6 +483,13 @@ impl Renderer {
         let mut settings = self.settings(placement, cfg);
         if cfg.reconstruction {
             settings.subframe = Some(subframe_of(frame));
+            if self.reconstruct_on_gpu {
+                let key = self.key_of(placement, views, cfg);
+                let reset = !self.history_key.as_ref().is_some_and(|k| k.continues(&key));
+                self.history_key = Some(key);
+                self.history.clear();
+                settings.reconstruct = Some(reset);
+            }
         }
         // The prediction buffer (B10 §4): a full traversal when its
         // contents do not belong to this view, and every α frames.
@@ -549,7 +563,9 @@ impl Renderer {
             self.last.push_back((index, out.feedback));
         }
         self.prediction = pb_next.map(|(k, since)| (k, if predicted { since } else { 0 }));
-        let images = if cfg.reconstruction {
+        let images = if cfg.reconstruction && self.reconstruct_on_gpu {
+            out.images
+        } else if cfg.reconstruction {
             let t = Instant::now();
             let images = self.reconstruct(frame, placement, views, cfg, out.images);
             stats.reconstruct_ms = ms(t);
@@ -579,28 +595,33 @@ impl Renderer {
         cfg: &RenderConfig,
         rendered: Vec<Vec<[f32; 4]>>,
     ) -> Vec<Vec<[f32; 4]>> {
-        let key = HistoryKey {
-            views: views.to_vec(),
-            cfg: cfg.clone(),
-            tf: self.tf_version(),
-            tools: self.tools.0,
-            placement: *placement,
-        };
+        let key = self.key_of(placement, views, cfg);
         let valid = self.history_key.as_ref().is_some_and(|k| k.continues(&key))
             && self.history.len() == views.len();
+        self.history_key = Some(key);
         if !valid {
             self.history = views
                 .iter()
                 .map(|v| ViewHistory::new(v.resolution[0], v.resolution[1]))
                 .collect();
         }
-        self.history_key = Some(key);
         let k = subframe_of(frame);
         self.history
             .iter_mut()
             .zip(rendered)
             .map(|(h, img)| h.update(k, &img))
             .collect()
+    }
+
+    /// What a frame's reconstruction history is made under.
+    fn key_of(&self, placement: &Placement, views: &[View], cfg: &RenderConfig) -> HistoryKey {
+        HistoryKey {
+            views: views.to_vec(),
+            cfg: cfg.clone(),
+            tf: self.tf_version(),
+            tools: self.tools.0,
+            placement: *placement,
+        }
     }
 
     /// Renders until the cut stops changing (every leaf adequate, nothing

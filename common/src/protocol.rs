@@ -93,7 +93,8 @@ pub struct FrameStats {
     pub upload_ms: f64,
     pub index_ms: f64,
     pub render_ms: f64,
-    /// Frame reconstruction's filter (G10 §5), zero without it.
+    /// Frame reconstruction's filter (G10 §5) where it runs on the CPU;
+    /// zero without it, and on the GPU, where it is part of `render_ms`.
     pub reconstruct_ms: f64,
     /// Writing the images (PNG, .npy) and the streamed copies.
     pub output_ms: f64,

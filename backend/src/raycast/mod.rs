@@ -5,6 +5,7 @@
 pub mod params;
 pub mod pool;
 pub mod shader;
+mod subframes;
 pub mod texels;
 pub mod tiles;
 
@@ -301,6 +302,11 @@ pub struct RenderSettings {
     pub iso: [f32; 4],
     /// Render only this quincunx sub-frame (frame reconstruction, G10 §5).
     pub subframe: Option<u32>,
+    /// With `subframe`: reconstruct the other pixels on the GPU before the
+    /// read-back (`subframes`), first forgetting the history where
+    /// `Some(true)`. `None`: the image comes back with the sub-frame's
+    /// pixels alone.
+    pub reconstruct: Option<bool>,
     /// Prediction buffer (B10 §4): mode (0 off, 1 full traversal, 2
     /// predicted), local window (data units), κ low, κ high.
     pub predict: [f32; 4],
@@ -358,6 +364,7 @@ impl Default for RenderSettings {
             gamma: 0.0,
             iso: [0.0; 4],
             subframe: None,
+            reconstruct: None,
             predict: [0.0; 4],
             tools: [ToolParams::default(); MAX_ENHANCERS],
             macrocells: true,
@@ -426,6 +433,8 @@ pub struct Raycaster {
     tools: wgpu::Buffer,
     /// The per-frame buffers, kept across frames and grown by capacity.
     frame: FrameBuffers,
+    /// Frame reconstruction's filter, made when a frame first asks for it.
+    subframes: Option<subframes::SubframeFilter>,
 }
 
 /// What one frame renders.
@@ -771,6 +780,7 @@ impl Raycaster {
             float_pool,
             tools,
             frame: FrameBuffers::new(gpu),
+            subframes: None,
         })
     }
 
@@ -1090,6 +1100,24 @@ impl Raycaster {
                 n.min(tiles::TILES_PER_ROW),
                 n.div_ceil(tiles::TILES_PER_ROW),
                 1,
+            );
+        }
+        if let (Some(k), Some(reset)) = (settings.subframe, settings.reconstruct) {
+            let filter = match &mut self.subframes {
+                Some(f) => f,
+                None => self.subframes.insert(subframes::SubframeFilter::new(gpu)?),
+            };
+            let sizes: Vec<[u32; 2]> = views.iter().map(|v| v.resolution).collect();
+            // The image buffer's generation: the count of buffers made
+            // changes whenever it is replaced.
+            filter.encode(
+                gpu,
+                &mut enc,
+                &fr.image.buffer,
+                fr.made.buffers,
+                &sizes,
+                k,
+                reset,
             );
         }
         enc.copy_buffer_to_buffer(&fr.image.buffer, 0, &fr.readback.buffer, 0, img_size);
