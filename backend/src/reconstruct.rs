@@ -1,9 +1,9 @@
 //! Adaptive frame reconstruction (G10 §5): each view's pixels form four
 //! sub-frames on a quincunx lattice (one pixel of every 2×2 quad each); one
 //! sub-frame is rendered per frame and the others are reconstructed by a
-//! spatio-temporal filter. The renderer runs the filter on the GPU
-//! (`shaders/reconstruct.wgsl`, `raycast::subframes`); this is the same
-//! filter on the CPU, the reference the GPU's is tested against.
+//! spatio-temporal filter. This is the filter on the CPU, which the
+//! renderer runs on CPU devices; on a GPU it runs the same filter there
+//! (`shaders/reconstruct.wgsl`, `raycast::subframes`), tested against this.
 //!
 //! For a pixel Q that was not rendered this frame, with cross neighbours
 //! A, B, C, D (opposite pairs A–C and B–D):

@@ -55,7 +55,10 @@ pub struct Renderer {
     history_key: Option<HistoryKey>,
     /// Run frame reconstruction's filter on the GPU, after the rays and
     /// before the read-back (`raycast::subframes`); off, on the CPU after
-    /// the read-back ([`ViewHistory`]). The same filter either way.
+    /// the read-back ([`ViewHistory`]). The same filter either way. On by
+    /// default except on a CPU device, where the GPU's share of the cores
+    /// is the CPU filter's, and the CPU filter is a little cheaper
+    /// (docs/figures.md, "Frame reconstruction").
     pub reconstruct_on_gpu: bool,
     /// The stored bricks' smallest and largest variance (B10 §4.5).
     variance_range: (f32, f32),
@@ -162,6 +165,7 @@ impl Renderer {
                 io_threads: 2,
             },
         );
+        let reconstruct_on_gpu = gpu.info.device_type != wgpu::DeviceType::Cpu;
         Ok(Renderer {
             gpu,
             raycaster,
@@ -172,7 +176,7 @@ impl Renderer {
             last: VecDeque::new(),
             history: Vec::new(),
             history_key: None,
-            reconstruct_on_gpu: true,
+            reconstruct_on_gpu,
             variance_range,
             prediction: None,
             tools: (0, Vec::new()),

@@ -133,6 +133,7 @@ fn the_filter_on_the_gpu_is_the_filter_on_the_cpu_for_several_views_of_odd_sizes
     ];
     let cfg = config(true);
     let mut gpu = Renderer::new(&db, &cfg).unwrap();
+    gpu.reconstruct_on_gpu = true;
     let mut cpu = Renderer::new(&db, &cfg).unwrap();
     cpu.reconstruct_on_gpu = false;
     let mut worst = 0.0f32;
