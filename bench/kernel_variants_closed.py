@@ -14,10 +14,14 @@ release build. The kernel is dumped with PARALLAX_KERNEL_DUMP, each variant
 written from it by textual changes and loaded with PARALLAX_KERNEL_SOURCE.
 Variants marked "cost only" compute a wrong image on purpose, to measure
 what a part of the frame costs; the others are whole renderers whose RMSE
-against the reference counts. Three rows change no code: the 8-bit bricks'
-own kernel; the same kernel on memory that glibc backs with transparent
-huge pages (GLIBC_TUNABLES=glibc.malloc.hugetlb=1: lavapipe allocates the
-brick pool with malloc); and llvmpipe asked for 512-bit vectors
+against the reference counts. Some rows change no code: the 8-bit bricks'
+own kernel, filtered by lavapipe's 8-bit integer path (GALLIVM_PERF
+empty, the driver's default) or by its float path
+(GALLIVM_PERF=no_aos_sampling, which parallax sets unless told otherwise);
+lavapipe with two or eight threads a core (LP_NUM_THREADS); the same
+kernel on memory that glibc backs with transparent huge pages
+(GLIBC_TUNABLES=glibc.malloc.hugetlb=1: lavapipe allocates the brick pool
+with malloc); and llvmpipe asked for 512-bit vectors
 (LP_NATIVE_VECTOR_WIDTH=512).
 
 Each round runs every variant once (`parallax render --sync`, 16 frames,
@@ -184,11 +188,18 @@ VARIANTS = {
     "lookahead-2": ("full-b64", LOOKAHEAD_2, {}, True, "each sample fetched two passes ahead instead of one"),
     "cubic-midpoint": ("full-b64", CUBIC_MIDPOINT, {}, True,
                        "each segment halved at a midpoint value from the cubic through the samples around it"),
-    "8-bit": ("8bit-b64", [], {}, True, "the same kernel on 8-bit bricks (a quarter of the memory)"),
+    "8-bit": ("8bit-b64", [], {"GALLIVM_PERF": ""}, True,
+              "the same kernel on 8-bit bricks (a quarter of the memory), filtered by gallivm's 8-bit integer path"),
     "huge-pages": ("full-b64", [], {"GLIBC_TUNABLES": "glibc.malloc.hugetlb=1"}, True,
                    "the same on transparent huge pages (glibc's malloc, which lavapipe's pool comes from)"),
     "vector-512": ("full-b64", [], {"LP_NATIVE_VECTOR_WIDTH": "512"}, True,
                    "the same with llvmpipe asked for 512-bit vectors (16 lanes)"),
+    "8-bit-soa": ("8bit-b64", [], {"GALLIVM_PERF": "no_aos_sampling"}, True,
+                  "8-bit bricks filtered by gallivm's float path (what parallax asks lavapipe for)"),
+    "threads-2x": ("full-b64", [], {"LP_NUM_THREADS": "4"}, True,
+                   "lavapipe with two threads a core instead of four"),
+    "threads-8x": ("full-b64", [], {"LP_NUM_THREADS": "16"}, True,
+                   "lavapipe with eight threads a core instead of four"),
 }
 
 

@@ -177,13 +177,26 @@ pub fn choose_adapter(adapters: &[AdapterDesc], req: &AdapterRequest) -> Result<
 /// than with four blocks per core, `parallax render` on 2 cores). Unless
 /// the user set it, this asks for four threads per core, at most 32 (the
 /// driver's limit): still all cores busy, in blocks small enough to even
-/// out. It only sets an environment variable the driver reads when it
-/// starts; other adapters ignore it. Call it first thing in `main`, before
-/// any other thread exists.
+/// out.
+///
+/// It also asks lavapipe to filter 8-bit textures (the pool of 8-bit
+/// bricks) on its float path instead of its 8-bit integer one
+/// (`GALLIVM_PERF=no_aos_sampling`), unless the user set `GALLIVM_PERF`:
+/// the integer path rounds the interpolation weights to 8 bits, an error
+/// the float pool does not have, and was not faster (the brain's 4 mm
+/// partner on 8-bit bricks took 0.93 of its time with the float path;
+/// docs/figures.md, "Filtering 8-bit bricks in float").
+///
+/// It only sets environment variables the driver reads when it starts;
+/// other adapters ignore them. Call it first thing in `main`, before any
+/// other thread exists.
 pub fn spread_cpu_device_work() {
     if std::env::var_os("LP_NUM_THREADS").is_none() {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         std::env::set_var("LP_NUM_THREADS", (4 * cores).min(32).to_string());
+    }
+    if std::env::var_os("GALLIVM_PERF").is_none() {
+        std::env::set_var("GALLIVM_PERF", "no_aos_sampling");
     }
 }
 
