@@ -7,14 +7,19 @@ use parallax_common::atomic::AtomicFile;
 use std::io::Write;
 use std::path::Path;
 
-/// Linear [0, 1] → sRGB 8 bit: the formula, rounded (NaN and ±∞ give 0).
-/// [`srgb8`] gives the same value from tables, for every input.
-fn srgb8_formula(v: f32) -> u8 {
-    let v = if v.is_finite() {
+/// A colour value in [0, 1] (NaN and ±∞ give 0).
+fn unit(v: f32) -> f32 {
+    if v.is_finite() {
         v.clamp(0.0, 1.0)
     } else {
         0.0
-    };
+    }
+}
+
+/// Linear [0, 1] → sRGB 8 bit: the formula, rounded (NaN and ±∞ give 0).
+/// [`srgb8`] gives the same value from tables, for every input.
+fn srgb8_formula(v: f32) -> u8 {
+    let v = unit(v);
     let s = if v <= 0.003_130_8 {
         12.92 * v
     } else {
@@ -69,11 +74,7 @@ fn srgb_tables() -> &'static SrgbTables {
 /// Linear [0, 1] → sRGB 8 bit, the same code as the formula for every f32
 /// (NaN and ±∞ give 0), without a power per value.
 pub fn srgb8(v: f32) -> u8 {
-    let v = if v.is_finite() {
-        v.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
+    let v = unit(v);
     let t = srgb_tables();
     let mut code = t.guess[(v * SRGB_BUCKETS as f32) as usize] as usize;
     while code < 255 && v >= t.threshold[code + 1] {
@@ -83,12 +84,13 @@ pub fn srgb8(v: f32) -> u8 {
 }
 
 /// The 8-bit sRGB colour of each pixel (over black), 3 bytes a pixel, in
-/// parallel over rows of pixels.
+/// parallel over runs of pixels.
 pub fn rgb8(px: &[[f32; 4]]) -> Vec<u8> {
     use rayon::prelude::*;
+    const CHUNK: usize = 4096;
     let mut out = vec![0u8; px.len() * 3];
-    out.par_chunks_mut(3 * 4096)
-        .zip(px.par_chunks(4096))
+    out.par_chunks_mut(3 * CHUNK)
+        .zip(px.par_chunks(CHUNK))
         .for_each(|(o, p)| {
             for (o, p) in o.chunks_exact_mut(3).zip(p) {
                 o.copy_from_slice(&[srgb8(p[0]), srgb8(p[1]), srgb8(p[2])]);

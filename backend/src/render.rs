@@ -485,14 +485,24 @@ impl Renderer {
 
         let scene = self.geometry(placement);
         let mut settings = self.settings(placement, cfg);
+        // Frame reconstruction: whether this frame continues the history
+        // (the views, render settings, transfer function and tools the
+        // same, the placement moved, not jumped).
+        let mut continues = false;
         if cfg.reconstruction {
             settings.subframe = Some(subframe_of(frame));
+            let key = HistoryKey {
+                views: views.to_vec(),
+                cfg: cfg.clone(),
+                tf: self.tf_version(),
+                tools: self.tools.0,
+                placement: *placement,
+            };
+            continues = self.history_key.as_ref().is_some_and(|k| k.continues(&key));
+            self.history_key = Some(key);
             if self.reconstruct_on_gpu {
-                let key = self.key_of(placement, views, cfg);
-                let reset = !self.history_key.as_ref().is_some_and(|k| k.continues(&key));
-                self.history_key = Some(key);
                 self.history.clear();
-                settings.reconstruct = Some(reset);
+                settings.reconstruct = Some(!continues);
             }
         }
         // The prediction buffer (B10 §4): a full traversal when its
@@ -571,7 +581,7 @@ impl Renderer {
             out.images
         } else if cfg.reconstruction {
             let t = Instant::now();
-            let images = self.reconstruct(frame, placement, views, cfg, out.images);
+            let images = self.reconstruct(frame, views, continues, out.images);
             stats.reconstruct_ms = ms(t);
             images
         } else {
@@ -587,23 +597,17 @@ impl Renderer {
         })
     }
 
-    /// Frame reconstruction (G10 §5): the rendered sub-frame into each
-    /// view's history, the rest filtered. The history is dropped when the
-    /// views, the render settings, the transfer function or the tools
-    /// change, or the placement jumps.
+    /// Frame reconstruction (G10 §5) on the CPU: the rendered sub-frame
+    /// into each view's history, the rest filtered. The history starts
+    /// anew unless this frame `continues` it.
     fn reconstruct(
         &mut self,
         frame: u64,
-        placement: &Placement,
         views: &[View],
-        cfg: &RenderConfig,
+        continues: bool,
         rendered: Vec<Vec<[f32; 4]>>,
     ) -> Vec<Vec<[f32; 4]>> {
-        let key = self.key_of(placement, views, cfg);
-        let valid = self.history_key.as_ref().is_some_and(|k| k.continues(&key))
-            && self.history.len() == views.len();
-        self.history_key = Some(key);
-        if !valid {
+        if !continues || self.history.len() != views.len() {
             self.history = views
                 .iter()
                 .map(|v| ViewHistory::new(v.resolution[0], v.resolution[1]))
@@ -615,17 +619,6 @@ impl Renderer {
             .zip(rendered)
             .map(|(h, img)| h.update(k, &img))
             .collect()
-    }
-
-    /// What a frame's reconstruction history is made under.
-    fn key_of(&self, placement: &Placement, views: &[View], cfg: &RenderConfig) -> HistoryKey {
-        HistoryKey {
-            views: views.to_vec(),
-            cfg: cfg.clone(),
-            tf: self.tf_version(),
-            tools: self.tools.0,
-            placement: *placement,
-        }
     }
 
     /// Renders until the cut stops changing (every leaf adequate, nothing
