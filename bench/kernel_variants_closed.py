@@ -21,8 +21,11 @@ empty, the driver's default) or by its float path
 lavapipe with two or eight threads a core (LP_NUM_THREADS); the same
 kernel on memory that glibc backs with transparent huge pages
 (GLIBC_TUNABLES=glibc.malloc.hugetlb=1: lavapipe allocates the brick pool
-with malloc); and llvmpipe asked for 512-bit vectors
-(LP_NATIVE_VECTOR_WIDTH=512).
+with malloc); llvmpipe asked for 512-bit vectors
+(LP_NATIVE_VECTOR_WIDTH=512); and llvmpipe held to SSE4.1
+(GALLIUM_OVERRIDE_CPU_CAPS=sse4.1: no AVX, so no gather instructions).
+"unroll-2" takes two samples a pass on the 8-bit bricks, the same samples
+and image as their own kernel's ("8-bit-soa").
 
 Each round runs every variant once (`parallax render --sync`, 16 frames,
 the median render_ms of the last 8) after a few quiet seconds; the table
@@ -174,6 +177,64 @@ CUBIC_MIDPOINT = [
             s_prev = s;"""),
 ]
 
+# Two samples a pass, their fetches back to back (the kernel of bricks
+# without LOOKAHEAD, the 8-bit ones): whatever lives across lavapipe's
+# call to its filter is saved and restored once for two fetches instead of
+# once for each; the second segment composited after the first, so the
+# samples, their order and the image are the base's.
+UNROLL_2 = [
+    ("""            var tn: f32;
+            var s: f32;
+""", """            var tn: f32;
+            var s: f32;
+            var have2 = false;
+            var tn2 = 0.0;
+            var s2 = 0.0;
+"""),
+    ("""                tn = next_sample(&ray, t, h, &k, tc, t_exit);
+                s = sample_levels(lv, blend, o + d * tn);
+            }
+""", """                tn = next_sample(&ray, t, h, &k, tc, t_exit);
+                have2 = tn < t_exit;
+                tn2 = tn;
+                if (have2) {
+                    tn2 = next_sample(&ray, t, h, &k, tn, t_exit);
+                }
+                s = sample_levels(lv, blend, o + d * tn);
+                s2 = sample_levels(lv, blend, o + d * tn2);
+            }
+"""),
+    ("""            if (bent || tc >= t_exit || terminated(acc)) {
+                break;
+            }
+        }
+""", """            if (bent || tc >= t_exit || terminated(acc)) {
+                break;
+            }
+            if (have2) {
+                let avg2 = analytic_average(s_prev, s2);
+                var smp2: Sample;
+                smp2.pos = o + d * (0.5 * (tc + tn2));
+                smp2.len = tn2 - tc;
+                smp2.dir = d;
+                smp2.scalar = s2;
+                smp2.tau = avg2.x;
+                smp2.emission = avg2.yzw;
+                smp2.alpha_scale = 1.0;
+                smp2.alpha_mix = 0.0;
+                smp2.material = frame.light;
+                accumulate(&acc, segment_optics(smp2, 1.0), smp2);
+                n_samples = n_samples + 1u;
+                s_prev = s2;
+                tc = tn2;
+                if (tc >= t_exit || terminated(acc)) {
+                    break;
+                }
+            }
+        }
+"""),
+]
+
 # name: (database, kernel changes, environment, whether the image counts, what it is)
 VARIANTS = {
     "base": ("full-b64", [], {}, True, "bricks of 64, closed form, 5.62 mm: the partner of VTK at 4 mm"),
@@ -196,6 +257,10 @@ VARIANTS = {
                    "the same with llvmpipe asked for 512-bit vectors (16 lanes)"),
     "8-bit-soa": ("8bit-b64", [], {"GALLIVM_PERF": "no_aos_sampling"}, True,
                   "8-bit bricks filtered by gallivm's float path (what parallax asks lavapipe for)"),
+    "unroll-2": ("8bit-b64", UNROLL_2, {}, True,
+                 "8-bit bricks, two samples a pass with their fetches back to back (the same samples and image)"),
+    "no-avx": ("8bit-b64", [], {"GALLIUM_OVERRIDE_CPU_CAPS": "sse4.1"}, True,
+               "8-bit bricks, llvmpipe held to SSE4.1: 4 lanes, no gather instructions, no FMA"),
     "threads-2x": ("full-b64", [], {"LP_NUM_THREADS": "4"}, True,
                    "lavapipe with two threads a core instead of four"),
     "threads-8x": ("full-b64", [], {"LP_NUM_THREADS": "16"}, True,
