@@ -20,7 +20,7 @@ colin=/usr/share/mricron/templates/ch2.nii.gz
 [ -f "$out/field-$size.nrrd" ] || $bin synth marschner-lobb --size "$size" --type f32 -o "$out/field-$size.nrrd"
 for q in u8 u16; do
   echo "== bricks quantised to $q"
-  $bin bench --codecs "$colin,$out/ct-$size.nrrd,$out/field-$size.nrrd" --quantize "$q" --out "$out/$q"
+  $bin bench codecs "$colin,$out/ct-$size.nrrd,$out/field-$size.nrrd" --quantize "$q" --out "$out/$q"
 done
 
 echo "== cold-cache render of Colin27 (512x512 desktop view), LZ4 against the default codec"

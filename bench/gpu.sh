@@ -3,7 +3,7 @@
 # 1024×576 window, 1 voxel per pixel) on whatever adapter is present: Colin27
 # turned 1° per frame by configs/scripts/rotate-1deg.toml, with the opaque
 # skin and the translucent brain transfer functions, plain and with frame
-# reconstruction; then `parallax bench` (error against time per knob) at the
+# reconstruction; then `parallax bench sweep` (error against time per knob) at the
 # same size. Prints the adapter chosen and the median frame rate of each run,
 # beside G10's 23–60 Hz (opaque) and 11–39 Hz (transparent) on a GTX 280.
 # Meant for a machine with a GPU; on lavapipe give a smaller size.
@@ -75,4 +75,4 @@ for tf in skin brain; do
   done
 done
 echo "G10 (GTX 280, 1024×576, 1 voxel/pixel): opaque 23–60 Hz, transparent 11–39 Hz"
-$bin bench --volume "$colin" --size "$size" --out "$out/bench" 2>&1 | tee "$out/bench.log"
+$bin bench sweep --volume "$colin" --size "$size" --out "$out/bench" 2>&1 | tee "$out/bench.log"

@@ -28,7 +28,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import kernel_variants as kv  # noqa: E402
+import rounds as kv  # noqa: E402
 import vtk_compare as vc  # noqa: E402
 
 

@@ -7,16 +7,16 @@ run (CASES): the Colin27 MRI with a translucent brain (the full study), the
 same head as opaque skin, and a 256³ CT phantom in Hounsfield units that is
 mostly air, under 3D Slicer's CT-Bone preset.
 
-What a pixel means (DESIGN.md): with shading off, the premultiplied
+What a pixel means (docs/design.md): with shading off, the premultiplied
 emission–absorption integral C = ∫ τ c exp(−∫τ) dt, A = 1 − exp(−∫τ dt) along
 the pixel's ray inside the box [0, N·s]. Every image here is compared with the
 reference as float premultiplied RGBA (RMSE over all channels and pixels, max
-abs, PSNR with peak 1), as `parallax bench` does.
+abs, PSNR with peak 1), as `parallax bench sweep` does.
 
 The reference is Parallax itself at a very small step (render.step_factor =
 0.0625, i.e. 1/16 mm, interpolation = "exact", full-precision bricks,
 accuracy = 0.01, early_termination = 1, no visibility culling). `parallax
-bench` measures that configuration at RMSE ≈ 3e-5 from the exact integral on
+bench sweep` measures that configuration at RMSE ≈ 3e-5 from the exact integral on
 this dataset (out/bench/bench.csv), far below every error compared here.
 
 VTK is set up to compute the same integral: the same camera (inverse scene
@@ -37,8 +37,8 @@ five reads, which dominate a sample's cost on lavapipe (the case's
 "analytic": per segment, a few products per piece of the transfer function
 between its control points) for the two Colin27 functions of 4 and 6
 points, or the 2D table (render.preintegration = "2d": one bilinear fetch
-a segment, what every case used before, bench/vtk_results_xeon_level1.csv)
-for the CT's 14, where the closed form's pieces cost more than the fetch;
+a segment, what every case used before the closed form) for the CT's 14,
+where the closed form's pieces cost more than the fetch;
 on a finer ladder of steps (TABLE_STEPS), early termination matched; and the same
 from a database imported with bricks of 64 voxels instead of 32 (`parallax
 import --brick 64`: half as many leaves along a ray, so less traversal per
@@ -74,30 +74,26 @@ to bench/vtk_results.csv.
 
 import argparse
 import csv
-import ctypes
 import json
-import math
 import os
-import re
 import shutil
 import statistics
-import struct
 import subprocess
 import sys
 import time
 import tomllib
-import zlib
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
+import bench_common as common
+from bench_common import (Meter, Placement, alpha_centroid, best_shift, image_error, load_tf,
+                          log, to_srgb8, wait_idle, write_png)
+from vtk_side import H, W, read_nrrd, vtk_read_volume, vtk_run, vtk_setup
+
 ROOT = Path(__file__).resolve().parent.parent
 BENCH = ROOT / "bench"
-VOLUME = Path("/usr/share/mricron/templates/ch2.nii.gz")
-W = H = 512
-SCREEN = (0.3, 0.3)          # m, centred on the origin, z = 0
-EYE = np.array([0.0, 0.0, 0.8])
 # VTK's fixed-point compositing stops a ray once the remaining transparency
 # drops below 0xff in 15-bit fixed point (vtkFixedPointVolumeRayCastHelper.h,
 # CompositeColorAndCheckEarlyTermination): opacity 1 − 255/32768.
@@ -133,181 +129,6 @@ class Ladder(NamedTuple):
     tag: str = ""
 
 STAGES = ["refine_ms", "upload_ms", "index_ms", "render_ms", "output_ms", "total_ms"]
-
-
-def log(*a):
-    print(*a, flush=True)
-
-
-# --------------------------------------------------------------------------
-# The machine is shared (2 cores): time only when nothing else runs, and
-# measure how much CPU other processes took during each timed section.
-
-def busy_seconds():
-    """CPU seconds all cores have spent busy since boot (/proc/stat)."""
-    f = [int(x) for x in open("/proc/stat").readline().split()[1:]]
-    idle = f[3] + f[4]
-    return (sum(f[:8]) - idle) / os.sysconf("SC_CLK_TCK")
-
-
-def own_cpu(children=False):
-    t = os.times()
-    return t.children_user + t.children_system if children else t.user + t.system
-
-
-class Meter:
-    """Wall time, own CPU and other processes' CPU over a section."""
-
-    def __init__(self, children=False):
-        self.children = children
-
-    def __enter__(self):
-        self.b0, self.c0, self.t0 = busy_seconds(), own_cpu(self.children), time.perf_counter()
-        return self
-
-    def __exit__(self, *exc):
-        self.wall = time.perf_counter() - self.t0
-        self.cpu = own_cpu(self.children) - self.c0
-        # (/proc/stat ticks at 1/100 s: allow that much jitter.)
-        self.other = max(0.0, busy_seconds() - self.b0 - self.cpu - 0.02)
-        self.other_cores = self.other / max(self.wall, 1e-9)
-        self.cores = self.cpu / max(self.wall, 1e-9)
-
-
-# Seconds of quiet a timed section waits for (--quiet).
-QUIET_S = 10.0
-
-
-def wait_idle(limit_cores=0.1, quiet_s=None, timeout_s=3600.0):
-    """Waits until other processes have used less than `limit_cores` over
-    `quiet_s` seconds in a row (sampled each second; QUIET_S by default)."""
-    quiet_s = QUIET_S if quiet_s is None else quiet_s
-    t0 = time.time()
-    warned = False
-    quiet = 0.0
-    while quiet < quiet_s:
-        with Meter() as m:
-            time.sleep(1.0)
-        if m.other_cores < limit_cores:
-            quiet += m.wall
-            continue
-        quiet = 0.0
-        if not warned:
-            log(f"    (machine busy: {m.other_cores:.2f} cores used by other processes; waiting)")
-            warned = True
-        if time.time() - t0 > timeout_s:
-            log("    WARNING: machine still busy after waiting; timing anyway")
-            return False
-    return True
-
-
-# --------------------------------------------------------------------------
-# Geometry: the scene placement (DESIGN.md "Volume space") and its inverse.
-
-def rot_x(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-
-
-def rot_y(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-
-
-def rot_z(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-
-
-class Placement:
-    """p (volume, mm) ↦ center + R·(size/max(N·s))·(p − N·s/2); R = Rz·Ry·Rx."""
-
-    def __init__(self, center, size, rotation_deg, extent):
-        rx, ry, rz = (math.radians(d) for d in rotation_deg)
-        self.R = rot_z(rz) @ rot_y(ry) @ rot_x(rx)
-        self.center = np.asarray(center, float)
-        self.extent = np.asarray(extent, float)
-        self.scale = size / max(extent)
-
-    def to_display(self, p):
-        return self.center + self.R @ ((np.asarray(p, float) - self.extent / 2) * self.scale)
-
-    def to_volume(self, x):
-        return self.R.T @ (np.asarray(x, float) - self.center) / self.scale + self.extent / 2
-
-    def dir_to_volume(self, d):
-        return self.R.T @ np.asarray(d, float)
-
-
-# --------------------------------------------------------------------------
-# The transfer function (DESIGN.md "Transfer function").
-
-def load_tf(path):
-    pts = tomllib.loads(Path(path).read_text())["point"]
-    pts = sorted(pts, key=lambda p: p["value"])
-    v = np.array([p["value"] for p in pts], float)
-    col = np.array([p["color"] for p in pts], float)
-    tau = np.array([p["extinction"] for p in pts], float)
-    return v, col, tau
-
-
-def tf_at(tf, x):
-    """τ(x) and c(x): piecewise linear, constant beyond the ends."""
-    v, col, tau = tf
-    t = np.interp(x, v, tau)
-    c = np.stack([np.interp(x, v, col[:, k]) for k in range(3)], axis=-1)
-    return t, c
-
-
-# --------------------------------------------------------------------------
-# Image metrics.
-
-def image_error(img, ref):
-    d = img.astype(np.float64) - ref.astype(np.float64)
-    rmse = float(np.sqrt(np.mean(d * d)))
-    return rmse, float(np.max(np.abs(d))), -20.0 * math.log10(max(rmse, 1e-12))
-
-
-def alpha_centroid(img):
-    a = img[..., 3].astype(np.float64)
-    ys, xs = np.mgrid[0:a.shape[0], 0:a.shape[1]]
-    s = a.sum()
-    return float((a * (xs + 0.5)).sum() / s), float((a * (ys + 0.5)).sum() / s)
-
-
-def best_shift(img, ref, r=2):
-    """The whole-pixel shift (dx, dy) of `img` that best matches `ref`."""
-    best = None
-    for dy in range(-r, r + 1):
-        for dx in range(-r, r + 1):
-            sh = np.roll(np.roll(img, dy, axis=0), dx, axis=1)
-            e = float(np.sqrt(np.mean((sh[r:-r, r:-r] - ref[r:-r, r:-r]) ** 2)))
-            if best is None or e < best[0]:
-                best = (e, dx, dy)
-    return best[1], best[2]
-
-
-def write_png(path, rgb):
-    """8-bit RGB PNG without any imaging library."""
-    h, w, _ = rgb.shape
-    raw = b"".join(b"\x00" + rgb[j].tobytes() for j in range(h))
-
-    def chunk(t, d):
-        c = struct.pack(">I", len(d)) + t + d
-        return c + struct.pack(">I", zlib.crc32(t + d) & 0xFFFFFFFF)
-
-    Path(path).write_bytes(
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-        + chunk(b"IDAT", zlib.compress(raw, 6))
-        + chunk(b"IEND", b"")
-    )
-
-
-def to_srgb8(img):
-    c = np.clip(img[..., :3], 0.0, 1.0)
-    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
-    return (s * 255.0 + 0.5).astype(np.uint8)
 
 
 # --------------------------------------------------------------------------
@@ -400,239 +221,6 @@ def run_parallax(px, name, base, db, render, out, frames, reuse, timed=True):
     return img, med
 
 
-# --------------------------------------------------------------------------
-# VTK.
-
-def vtk_read_volume():
-    """ch2.nii.gz through vtkNIFTIImageReader, checked against the file's own
-    bytes: the voxels must come in raw file order (x fastest), as Parallax
-    reads them (it ignores qform/sform)."""
-    import gzip
-
-    import vtk
-    from vtk.util import numpy_support as ns
-
-    reader = vtk.vtkNIFTIImageReader()
-    reader.SetFileName(str(VOLUME))
-    reader.Update()
-    img = reader.GetOutput()
-    dims = img.GetDimensions()
-    spacing = img.GetSpacing()
-    arr = ns.vtk_to_numpy(img.GetPointData().GetScalars())
-
-    raw = gzip.open(VOLUME).read()
-    ndim = struct.unpack("<8h", raw[40:56])
-    datatype = struct.unpack("<h", raw[70:72])[0]
-    vox_offset = int(struct.unpack("<f", raw[108:112])[0])
-    slope, inter = struct.unpack("<2f", raw[112:120])
-    assert datatype == 2, f"expected u8 NIfTI (datatype 2), got {datatype}"
-    n = ndim[1] * ndim[2] * ndim[3]
-    fileorder = np.frombuffer(raw[vox_offset:vox_offset + n], dtype=np.uint8)
-    assert tuple(dims) == tuple(ndim[1:4]), (dims, ndim)
-    assert np.array_equal(arr, fileorder), "vtkNIFTIImageReader reordered the voxels"
-    assert slope in (0.0, 1.0) and inter == 0.0, (slope, inter)
-    assert img.GetScalarTypeAsString() == "unsigned char"
-    m = img.GetDirectionMatrix()
-    assert all(m.GetElement(i, j) == (1.0 if i == j else 0.0) for i in range(3) for j in range(3))
-    return reader, dims, spacing, arr.reshape(dims[2], dims[1], dims[0])
-
-
-def read_nrrd(path):
-    """The raw little-endian NRRD `parallax synth` writes: (None, dims,
-    spacing, array z, y, x)."""
-    data = Path(path).read_bytes()
-    end = data.index(b"\n\n")
-    fields = {}
-    for line in data[:end].decode().splitlines()[1:]:
-        if line.startswith("#") or ":" not in line:
-            continue
-        k, v = line.split(":", 1)
-        fields[k.strip()] = v.strip()
-    assert fields["encoding"] == "raw" and fields.get("endian", "little") == "little", fields
-    types = {"short": "<i2", "signed short": "<i2", "int16": "<i2", "unsigned char": "u1", "uchar": "u1",
-             "ushort": "<u2", "unsigned short": "<u2", "uint8": "u1", "uint16": "<u2"}
-    dtype = np.dtype(types[fields["type"]])
-    dims = tuple(int(x) for x in fields["sizes"].split())
-    spacing = (1.0, 1.0, 1.0)
-    if "spacings" in fields:
-        spacing = tuple(float(x) for x in fields["spacings"].split())
-    arr = np.frombuffer(data[end + 2:], dtype=dtype, count=dims[0] * dims[1] * dims[2])
-    return None, dims, spacing, arr.reshape(dims[2], dims[1], dims[0])
-
-
-def vtk_setup(tf, placement, threads, domain, volume):
-    """One VTK pipeline. domain:
-    "box"     — Parallax's domain: the field clamped to the edge voxels inside
-                [0, N·s] (DESIGN.md "Volume space"). The volume is padded with
-                one replicated voxel on every side (so trilinear interpolation
-                is the clamped field out to the box) and cropped to the box
-                with the mapper's cropping planes.
-    "centres" — VTK as it comes: the volume ends at the outer voxel centres
-                [½s, (N−½)s], half a voxel short of the box on every face.
-    """
-    import vtk
-    from vtk.util import numpy_support as ns
-
-    reader, dims, spacing, arr = volume
-    extent = [d * s for d, s in zip(dims, spacing)]
-    if domain == "box":
-        padded = np.ascontiguousarray(np.pad(arr, 1, mode="edge"))
-        image = vtk.vtkImageData()
-        image.SetDimensions(dims[0] + 2, dims[1] + 2, dims[2] + 2)
-        image.SetSpacing(*spacing)
-        # VTK puts voxel centres at origin + i·s: the padding layer at −½s.
-        image.SetOrigin(*(-0.5 * s for s in spacing))
-        vtk_type = {np.dtype("u1"): vtk.VTK_UNSIGNED_CHAR, np.dtype("<i2"): vtk.VTK_SHORT,
-                    np.dtype("<u2"): vtk.VTK_UNSIGNED_SHORT}[arr.dtype]
-        sc = ns.numpy_to_vtk(padded.ravel(), deep=1, array_type=vtk_type)
-        image.GetPointData().SetScalars(sc)
-        source = vtk.vtkTrivialProducer()
-        source.SetOutput(image)
-        port = source.GetOutputPort()
-    else:
-        # VTK puts voxel centres at origin + i·s; Parallax at (i + ½)·s.
-        source = vtk.vtkImageChangeInformation()
-        source.SetInputConnection(reader.GetOutputPort())
-        source.SetOutputOrigin(*(0.5 * s for s in spacing))
-        source.Update()
-        port = source.GetOutputPort()
-
-    # Transfer function, sampled at every data value: colour linear in RGB;
-    # opacity per unit distance α = 1 − exp(−τ·1 mm) (piecewise-linear α is
-    # not piecewise-linear τ, hence the dense sampling; VTK's tables are
-    # indexed by integer data value anyway).
-    xs = np.arange(float(arr.min()), float(arr.max()) + 1.0)
-    tau, col = tf_at(tf, xs)
-    ctf = vtk.vtkColorTransferFunction()
-    ctf.SetColorSpaceToRGB()
-    otf = vtk.vtkPiecewiseFunction()
-    for x, t, c in zip(xs, tau, col):
-        ctf.AddRGBPoint(x, *c)
-        otf.AddPoint(x, 1.0 - math.exp(-t * 1.0))
-    prop = vtk.vtkVolumeProperty()
-    prop.SetColor(ctf)
-    prop.SetScalarOpacity(otf)
-    prop.SetScalarOpacityUnitDistance(1.0)
-    prop.SetInterpolationTypeToLinear()
-    prop.ShadeOff()
-
-    mapper = vtk.vtkFixedPointVolumeRayCastMapper()
-    mapper.SetInputConnection(port)
-    mapper.SetBlendModeToComposite()
-    mapper.SetNumberOfThreads(threads)
-    mapper.AutoAdjustSampleDistancesOff()
-    mapper.LockSampleDistanceToInputSpacingOff()
-    mapper.SetImageSampleDistance(1.0)
-    mapper.SetFinalColorWindow(1.0)
-    mapper.SetFinalColorLevel(0.5)
-    if domain == "box":
-        mapper.CroppingOn()
-        mapper.SetCroppingRegionPlanes(0.0, extent[0], 0.0, extent[1], 0.0, extent[2])
-        mapper.SetCroppingRegionFlagsToSubVolume()
-
-    volume = vtk.vtkVolume()
-    volume.SetMapper(mapper)
-    volume.SetProperty(prop)
-
-    ren = vtk.vtkRenderer()
-    ren.AddVolume(volume)
-    ren.SetBackground(0.0, 0.0, 0.0)
-    ren.SetBackgroundAlpha(0.0)
-    win = vtk.vtkRenderWindow()
-    win.SetOffScreenRendering(1)
-    win.SetAlphaBitPlanes(1)
-    win.SetMultiSamples(0)
-    win.AddRenderer(ren)
-    win.SetSize(W, H)
-
-    # The camera, in volume space (mm): the inverse placement of the eye, of
-    # the screen centre and of display +y; vertical view angle through the
-    # screen's top and bottom edges. The screen plane is perpendicular to the
-    # eye→centre line, so VTK's symmetric frustum is exactly the window.
-    cam = ren.GetActiveCamera()
-    cam.ParallelProjectionOff()
-    cam.SetPosition(*placement.to_volume(EYE))
-    cam.SetFocalPoint(*placement.to_volume([0.0, 0.0, 0.0]))
-    cam.SetViewUp(*placement.dir_to_volume([0.0, 1.0, 0.0]))
-    cam.SetViewAngle(math.degrees(2.0 * math.atan(SCREEN[1] / 2 / EYE[2])))
-    cam.UseHorizontalViewAngleOff()
-    ren.ResetCameraClippingRange()
-
-    grab = vtk.vtkWindowToImageFilter()
-    grab.SetInput(win)
-    grab.SetInputBufferTypeToRGBA()
-    grab.ReadFrontBufferOff()
-    grab.ShouldRerenderOff()
-
-    info = {
-        "vtk_version": vtk.vtkVersion.GetVTKVersion(),
-        "threads": mapper.GetNumberOfThreads(),
-        "global_default_threads": vtk.vtkMultiThreader.GetGlobalDefaultNumberOfThreads(),
-        "window_class": win.GetClassName(),
-        "volume_bounds": volume.GetBounds(),
-        "cropping": mapper.GetCropping() and mapper.GetCroppingRegionPlanes(),
-        "camera_position": cam.GetPosition(),
-        "camera_focal_point": cam.GetFocalPoint(),
-        "camera_view_up": cam.GetViewUp(),
-        "camera_view_angle": cam.GetViewAngle(),
-        "clipping_range": cam.GetClippingRange(),
-    }
-    return dict(vtk=vtk, ns=ns, mapper=mapper, win=win, ren=ren, grab=grab, info=info,
-                keep=(source, volume, prop))
-
-
-def vtk_read_framebuffer(v):
-    """The window's RGBA (8 bit per channel), top row first, as float."""
-    v["grab"].Modified()
-    v["grab"].Update()
-    out = v["grab"].GetOutput()
-    w, h, _ = out.GetDimensions()
-    a = v["ns"].vtk_to_numpy(out.GetPointData().GetScalars()).reshape(h, w, 4)
-    return a[::-1].astype(np.float32) / 255.0
-
-
-def vtk_read_raycast_image(v):
-    """The mapper's own ray-cast image (15-bit fixed point, before it is drawn
-    into the 8-bit framebuffer), top row first, as float."""
-    im = v["mapper"].GetRayCastImage()
-    vw, vh = im.GetImageViewportSize()
-    mw, mh = im.GetImageMemorySize()
-    uw, uh = im.GetImageInUseSize()
-    ox, oy = im.GetImageOrigin()
-    assert (vw, vh) == (W, H), (vw, vh)
-    m = re.match(r"_([0-9a-fA-F]+)_p_", im.GetImage())
-    assert m, im.GetImage()
-    buf = (ctypes.c_uint16 * (mw * mh * 4)).from_address(int(m.group(1), 16))
-    data = np.frombuffer(buf, dtype=np.uint16).reshape(mh, mw, 4)[:uh, :uw].astype(np.float32)
-    full = np.zeros((H, W, 4), np.float32)
-    full[oy:oy + uh, ox:ox + uw] = data / 32767.0
-    return full[::-1].copy()
-
-
-def vtk_run(v, sample_distance, repeats):
-    """Median wall time of renWin.Render() over `repeats` undisturbed renders
-    after one warm-up (tables, min-max volume, GL context)."""
-    v["mapper"].SetSampleDistance(sample_distance)
-    v["win"].Render()
-    times, cores, others = [], [], []
-    disturbed = 0
-    wait_idle()
-    while len(times) < repeats:
-        with Meter() as m:
-            v["win"].Render()
-        if m.other_cores > 0.1:
-            disturbed += 1
-            if disturbed <= 20:
-                log(f"    (render disturbed: other processes {m.other_cores:.2f} cores; again)")
-                wait_idle()
-                continue
-            if disturbed == 21:
-                log("    WARNING: could not get undisturbed renders; keeping disturbed ones")
-        times.append(m.wall * 1e3)
-        cores.append(m.cores)
-        others.append(m.other_cores)
-    return (times, statistics.median(cores), max(others),
-            vtk_read_framebuffer(v), vtk_read_raycast_image(v))
 
 
 # --------------------------------------------------------------------------
@@ -673,12 +261,11 @@ def vtk_time(a, case_name, step):
 def confirm_pairs(case, rows, a, px, out, base):
     """Each VTK setting and its partner, `a.pairs` times in alternating
     order, each side in a fresh process; one row per pair."""
-    global QUIET_S
     name = case["name"]
     result = []
     if a.pairs <= 0:
         return result
-    quiet, QUIET_S = QUIET_S, a.pair_quiet
+    quiet, common.QUIET_S = common.QUIET_S, a.pair_quiet
     log("")
     log(f"Alternating pairs ({a.pairs} per VTK setting, each side in a fresh process; "
         "VTK first in odd pairs):")
@@ -707,7 +294,7 @@ def confirm_pairs(case, rows, a, px, out, base):
                                first=sides[0], vtk_ms=t_vtk, parallax_ms=t_px, ratio=t_px / t_vtk))
             log(f"  VTK {vt['step_mm']:5} mm ↔ {o['config']} {o['step_mm']} mm, pair {k + 1} "
                 f"({sides[0]} first): VTK {t_vtk:7.1f} ms, Parallax {t_px:7.1f} ms, ratio {t_px / t_vtk:.2f}")
-    QUIET_S = quiet
+    common.QUIET_S = quiet
     return result
 
 
@@ -740,8 +327,8 @@ def fmt(x, spec):
 # termination matched, VTK on Parallax's domain).
 # `preint`: the ladders' render.preintegration. The closed form's time
 # over the 2D table's at the partners of VTK's settings (bench/
-# settings_closed_form_{brain,skin,ct}.csv, docs/figures.md "The exact
-# integral in closed form"): the brain (4 pieces) 0.86–0.91, the skin (2)
+# settings_closed_form_{brain,skin,ct}.csv, docs/performance.md
+# "Pre-integration per case"): the brain (4 pieces) 0.86–0.91, the skin (2)
 # 0.87; the CT (12) 0.96 at 0.88 mm but 1.24 at 5 mm.
 CASES = [
     dict(name="colin27-brain", title="Colin27 MRI, translucent brain", volume="colin27",
@@ -754,7 +341,6 @@ CASES = [
 
 
 def main():
-    global QUIET_S
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--parallax", default=str(ROOT / "target/release/parallax"))
     ap.add_argument("--out", default=str(ROOT / "out/bench-vtk"))
@@ -770,12 +356,12 @@ def main():
     ap.add_argument("--pairs-csv", default=str(BENCH / "vtk_pairs.csv"))
     ap.add_argument("--vtk-time", nargs=2, metavar=("CASE", "STEP"),
                     help="(internal) time VTK alone in this process and print the result")
-    ap.add_argument("--quiet", type=float, default=QUIET_S,
+    ap.add_argument("--quiet", type=float, default=common.QUIET_S,
                     help="seconds without other processes' load before each timed section")
     ap.add_argument("--pair-quiet", type=float, default=3.0,
                     help="the same before each side of an alternating pair")
     a = ap.parse_args()
-    QUIET_S = a.quiet
+    common.QUIET_S = a.quiet
     if a.vtk_time:
         vtk_time_main(a)
         return
@@ -941,14 +527,13 @@ def run_case(case, a, px, out, volume):
 
     # The ladders, by label: on 8-bit and on full-precision bricks (a float
     # pool read with the 2D table or the closed form fetches each sample a
-    # pass ahead, LOOKAHEAD; on a CPU device that made the skin at 1 mm with
-    # the 2D table take 0.84 of the 8-bit pool's time,
-    # bench/settings_skin.csv, while on a Zen 5 the brain's 8-bit bricks of
-    # 64 in closed form took 0.95 of the float pool's,
-    # bench/kernel_variants_closed_memory.csv); and level 1 of the float
-    # bricks of 64, where a case's error allows it (the opaque skin at
-    # VTK's coarser steps: half the leaves and a shorter descent per ray,
-    # docs/figures.md).
+    # pass ahead, LOOKAHEAD; which kind is faster depends on the case and
+    # the CPU: every brain partner of the last Zen 2 run is on 8-bit
+    # bricks, bench/vtk_pairs_zen2.csv, while a Zen 5 run picks both,
+    # bench/vtk_pairs_zen5_soa.csv); and level 1 of the float bricks of 64,
+    # where a case's error allows it (the opaque skin at VTK's 2 and 4 mm:
+    # half the leaves and a shorter descent per ray; docs/performance.md,
+    # "Against VTK's CPU ray caster").
     preint = case["preint"]
     label = PREINT_LABELS[preint]
     ladders = {}

@@ -3,7 +3,7 @@
 //
 // One invocation per pixel, one workgroup per listed 8×8 tile of a view
 // (only tiles whose rays can meet data are listed). The ray of a pixel comes from
-// G10 Eq. 1 (DESIGN.md "Which ray a pixel gets"), is moved to volume space
+// G10 Eq. 1 (docs/design.md "Which ray a pixel gets"), is moved to volume space
 // (data length units) and clipped to the volume's box. Traversal descends
 // from the root to the leaf that contains the current point, marches through
 // the leaf's brick at a step matched to its level (or skips it when it has no
@@ -38,12 +38,13 @@ override MACROCELLS: bool = false;
 // Count the samples taken (`counters`): benches and tests.
 override COUNT_SAMPLES: bool = false;
 // Fetch each sample one pass ahead of its segment (the sample loop in
-// `main`). Set for pools of float voxels read with the 2D table: on a CPU
-// device a float pool's fetch waits for memory, and the wait then overlaps
-// the segment's table fetch and compositing (Colin27 brain 3–13 % less
-// time, docs/figures.md "The next sample one pass ahead"). With the exact
-// table, or an 8-bit pool, it saved nothing measurable, and it adds a
-// fetch at each leaf's end: those kernels keep the plain loop.
+// `main`). Set for pools of float voxels read with the 2D table or the
+// closed form: on a CPU device a float pool's fetch waits for memory, and
+// the wait then overlaps the segment's table fetch or arithmetic (Colin27
+// brain 3–13 % less time with the 2D table, docs/performance.md "Kernel
+// changes on a CPU device"). With the exact table, or an 8-bit pool, it
+// saved nothing measurable, and it adds a fetch at each leaf's end: those
+// kernels keep the plain loop.
 override LOOKAHEAD: bool = false;
 
 // The distance from `p` along `d` (unit, 1/d in `inv_d`) to where the ray
@@ -104,7 +105,7 @@ fn first_cell(leaf: Leaf, p: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, len: f32
 // Only the empty cells before the first non-empty one are stepped over: a
 // second walk back from the leaf's exit to its last non-empty cell cost
 // more than the samples it saved on every view measured (5 % more kernel
-// instructions on the Colin27 skin and brain and a CT, docs/figures.md);
+// instructions on the Colin27 skin and brain and a CT, docs/performance.md "Tried and dropped");
 // an opaque ray ends before the trailing cells, a translucent one finds
 // few of them empty.
 fn cells_start(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32, t1: f32) -> f32 {
@@ -133,35 +134,33 @@ fn next_sample(ray: ptr<function, Ray>, t: f32, h: f32, k: ptr<function, u32>, t
     return tn;
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>,
-        @builtin(num_workgroups) groups: vec3<u32>) {
-    // One workgroup per listed 8×8 tile (`tiles`: the tiles whose rays can
-    // meet data, backend/src/raycast/tiles.rs): its view and place, read
-    // at the workgroup's index, a value a compiler can know to be uniform
-    // across the workgroup.
-    load_constants();
-    let w = wg.x + wg.y * groups.x;
-    if (w >= frame.dispatch.x) {
-        return;
-    }
-    let tile = tile_at(w);
-    let view = view_at(tile.x);
-    let gid = vec2<u32>(tile.y & 0xFFFFu, tile.y >> 16u) * 8u + lid.xy;
-    // size.w = 0: every pixel; 1 + k: only quincunx sub-frame k (frame
-    // reconstruction, G10 §5), one pixel of each 2×2 quad at its offset.
+// The pixel a lane of tile `gid` renders: every pixel (size.w = 0), or only
+// quincunx sub-frame k (size.w = 1 + k: frame reconstruction, G10 §5), one
+// pixel of each 2×2 quad at its offset.
+fn pixel_of(view: GpuView, gid: vec2<u32>) -> vec2<u32> {
     var px = gid;
     if (view.size.w != 0u) {
         let k = view.size.w - 1u;
         let off = vec2<u32>(select(0u, 1u, k == 1u || k == 2u), select(0u, 1u, k == 1u || k == 3u));
         px = gid * 2u + off;
     }
-    if (px.x >= view.size.x || px.y >= view.size.y) {
-        return;
-    }
-    let out = view.size.z + px.y * view.size.x + px.x;
+    return px;
+}
 
-    // G10 Eq. 1: the ray of screen point Q for projector E and observer V.
+// A pixel's ray in volume space (data length units), and sin(θ/2) of the
+// angle θ the pixel subtends from the ray's origin (the larger of its width
+// and height), for L12's adaptive step (Eq. 3).
+struct PixelRay {
+    o: vec3<f32>,
+    d: vec3<f32>,
+    sin_half: f32,
+}
+
+// G10 Eq. 1: the ray of screen point Q for projector E and observer V,
+// moved from display to volume space, p = Rᵀ(x − centre)/scale + N·s/2.
+// With MULTILEVEL it also sets the view's footprint constants (`lod_k`,
+// `lod_observer`, `lod_lf`).
+fn pixel_ray(view: GpuView, px: vec2<u32>) -> PixelRay {
     let q = vec3<f32>(
         view.region.x + (f32(px.x) + 0.5) / f32(view.size.x) * view.region.z,
         view.region.y + view.region.w - (f32(px.y) + 0.5) / f32(view.size.y) * view.region.w,
@@ -176,24 +175,257 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     }
     let origin = vec3<f32>((1.0 - eta) * v.x + eta * mcop_x, v.y, v.z);
     let dir_display = normalize(q - origin);
-    // sin(θ/2) of the angle θ the pixel subtends from the ray's origin (the
-    // larger of its width and height), for L12's adaptive step (Eq. 3).
     let half_px = 0.5 * vec2<f32>(view.region.z / f32(view.size.x), view.region.w / f32(view.size.y));
     let chord = max(length(normalize(q + vec3<f32>(half_px.x, 0.0, 0.0) - origin)
                            - normalize(q - vec3<f32>(half_px.x, 0.0, 0.0) - origin)),
                     length(normalize(q + vec3<f32>(0.0, half_px.y, 0.0) - origin)
                            - normalize(q - vec3<f32>(0.0, half_px.y, 0.0) - origin)));
-    let sin_half = 0.5 * chord;
-
-    // Display → volume space: p = Rᵀ(x − centre)/scale + N·s/2.
     let rt = mat3x3<f32>(frame.rt0.xyz, frame.rt1.xyz, frame.rt2.xyz);
-    var o = rt * (origin - frame.center.xyz) * frame.center.w + 0.5 * frame.extent.xyz;
-    var d = normalize(rt * dir_display);
+    var ray: PixelRay;
+    ray.o = rt * (origin - frame.center.xyz) * frame.center.w + 0.5 * frame.extent.xyz;
+    ray.d = normalize(rt * dir_display);
+    ray.sin_half = 0.5 * chord;
     if (MULTILEVEL) {
         lod_k = frame.lod.x * view.region.z / f32(view.size.x) / max(abs(v.z), 1e-9);
         lod_observer = rt * (v - frame.center.xyz) * frame.center.w + 0.5 * frame.extent.xyz;
         lod_lf = frame.lod.w > 0.5 && eta != 0.0;
     }
+    return ray;
+}
+
+// Where the march is in the octree: the ray parameter `t` and the probe
+// point it descends to, the node found and its box (`lo`, `hi`, the cell
+// of its level), where and through which face the ray leaves it, whether
+// that is the ray's end (`last`), its pool slot and data values;
+// `advance`: leave the node first (it has been integrated).
+struct Walk {
+    t: f32,
+    probe: vec3<f32>,
+    node: u32,
+    n: IndexNode,
+    level: u32,
+    cell: vec3<f32>,
+    lo: vec3<f32>,
+    hi: vec3<f32>,
+    t_exit: f32,
+    axis: u32,
+    last: bool,
+    slot: u32,
+    values: vec2<f32>,
+    advance: bool,
+    visited: u32,
+}
+
+// Through the nodes with nothing to integrate by traversal alone, to the
+// next leaf with data along the ray (o, d) before `t_end`: false at the
+// ray's end. A CPU device runs the leaf's whole body in `main` for all its
+// lanes on every pass of the outer loop, taken or not, so passes through
+// empty space must not include it. Entering an empty node restarts the
+// next brick's segment (`have_prev`); `snap` (the prediction buffer's
+// local traversal) moves t back to the found node's entry, not before
+// `entry`.
+fn next_leaf(w: ptr<function, Walk>, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t_end: f32,
+             entry: f32, acc: Acc, snap: ptr<function, bool>,
+             have_prev: ptr<function, bool>) -> bool {
+    var found_leaf = false;
+    loop {
+        // The first descent starts at the root, a later one at the
+        // neighbour across the exit face: one descent in the kernel's
+        // code (a CPU device runs every copy of it on every pass).
+        var start = 0u;
+        if ((*w).advance) {
+            if ((*w).last || terminated(acc)) {
+                break;
+            }
+            // Leave through the exit face and follow its neighbour pointer.
+            let axis = (*w).axis;
+            let next = neighbour((*w).n, axis, d[axis] > 0.0);
+            if (next == NONE16) {
+                break;
+            }
+            (*w).t = (*w).t_exit;
+            // Probe just across the exit face, inside this leaf's face on the
+            // other axes: a point the neighbour's box is sure to contain.
+            let eps = frame.render.z;
+            let lo_u = (*w).lo / frame.domain.xyz + eps;
+            let hi_u = (*w).hi / frame.domain.xyz - eps;
+            (*w).probe = clamp((o + d * (*w).t) / frame.domain.xyz, lo_u, hi_u);
+            if (d[axis] > 0.0) {
+                (*w).probe[axis] = hi_u[axis] + 2.0 * eps;
+            } else {
+                (*w).probe[axis] = lo_u[axis] - 2.0 * eps;
+            }
+            start = next;
+        }
+        let probe = (*w).probe;
+        let found = descend(start, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
+        (*w).node = found.node;
+        (*w).advance = true;
+        (*w).visited = (*w).visited + 1u;
+        if ((*w).visited > MAX_NODES_PER_RAY) {
+            break;
+        }
+        // `descend` has read the node's first texel.
+        let b = texel_at(frame_table, node_texel(found.node) + 1u);
+        let n = node_of(found.a, b);
+        (*w).n = n;
+        (*w).values = bitcast<vec2<f32>>(b.zw);
+        let level = n.data >> 24u;
+        (*w).level = level;
+        let cells = level_cells(level);
+        let size = frame.domain.xyz / cells;
+        let cell = clamp(floor(probe * cells), vec3<f32>(0.0), vec3<f32>(cells - 1.0));
+        let lo = cell * size;
+        let hi = lo + size;
+        (*w).cell = cell;
+        (*w).lo = lo;
+        (*w).hi = hi;
+        let tx = select(select((lo - o) * inv_d, (hi - o) * inv_d, d > vec3<f32>(0.0)),
+                        vec3<f32>(3.0e38), abs(d) < vec3<f32>(1e-30));
+        var t_exit = min(min(tx.x, tx.y), tx.z);
+        var axis = 0u;
+        if (tx.y <= tx.x && tx.y <= tx.z) {
+            axis = 1u;
+        } else if (tx.z <= tx.x && tx.z <= tx.y) {
+            axis = 2u;
+        }
+        (*w).axis = axis;
+        if (ISO && *snap) {
+            let te = select((hi - o) * inv_d, (lo - o) * inv_d, d > vec3<f32>(0.0));
+            let te_m = select(te, vec3<f32>(-3.0e38), abs(d) < vec3<f32>(1e-30));
+            (*w).t = clamp(max(max(te_m.x, te_m.y), te_m.z), entry, (*w).t);
+            *snap = false;
+        }
+        (*w).last = t_exit >= t_end;
+        t_exit = clamp(t_exit, (*w).t, t_end);
+        (*w).t_exit = t_exit;
+
+        let slot = n.data & NO_SLOT;
+        (*w).slot = slot;
+        if (slot != NO_SLOT && t_exit > (*w).t) {
+            found_leaf = true;
+            break;
+        }
+        // Nothing to integrate here; the next brick restarts its segment.
+        *have_prev = false;
+    }
+    return found_leaf;
+}
+
+// The step through a leaf: `step_factor` × its voxel, or with the adaptive
+// step L12 §4.4 Eq. 3, λ = t·sin(θ/2), the radius of the pixel's cone at
+// distance `t_eye` from the eye (data units, as the ray's parameter), taken
+// at the leaf's entry so that the samples of a leaf stay evenly spaced
+// (step_factor 0.5 is λ itself). The prediction buffer's sparse traversal
+// steps by the voxel size / κ, κ from the brick's variance (B10 §4.5).
+fn leaf_step(leaf: Leaf, t_eye: f32, sin_half: f32, sparse: bool) -> f32 {
+    let step_factor = frame.render.x;
+    let voxel = min(min(leaf.voxel.x, leaf.voxel.y), leaf.voxel.z);
+    var h = step_factor * voxel;
+    if (frame.render.w > 0.5) {
+        h = max(2.0 * step_factor * t_eye * sin_half, voxel / 64.0);
+    }
+    if (ISO && sparse) {
+        h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slot_range(leaf.slot).z));
+    }
+    return h;
+}
+
+// Macrocells: segments inside empty macrocells add exactly nothing, so the
+// march starts only from the last sample before the first non-empty cell,
+// on the same grid t + k·h (the samples computed by the same expressions,
+// so the image is bit for bit the one without macrocells). Sets k and
+// returns whether that first sample only starts the march; an all-empty
+// leaf needs only the value at its exit, for the next leaf's first segment.
+fn cells_skip(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t: f32, t_exit: f32,
+              h: f32, k: ptr<function, u32>) -> bool {
+    let start = cells_start(leaf, o, d, inv_d, t, t_exit);
+    if (start > 1.0e38) {
+        *k = 0xFFFFFFFFu;
+        return true;
+    }
+    var k0 = floor((start - t) / h);
+    if (k0 >= 1.0 && t + k0 * h > start) {
+        k0 = k0 - 1.0;
+    }
+    if (k0 >= 1.0) {
+        *k = u32(k0);
+        return true;
+    }
+    return false;
+}
+
+// What the segment from (tc, s_prev) to (tn, s) adds: its pre-integrated
+// average (the closed form, the 2D table, the table from the segment's
+// ends, or the table's segment integral), the enhancers' say, Phong
+// shading where it is not transparent, composited by the stepper.
+fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f32>,
+                     d: vec3<f32>, tc: f32, tn: f32, s_prev: f32, s: f32, e_prev: TfEnd,
+                     e: TfEnd) -> Sample {
+    var avg: vec4<f32>;
+    if (ANALYTIC_PREINT) {
+        avg = analytic_average(s_prev, s);
+    } else if (GRID_PREINT) {
+        avg = grid_average(s_prev, s);
+    } else if (END_PREINT) {
+        avg = end_average(e_prev, e);
+    } else {
+        avg = segment_average(0u, frame.counts.w, s_prev, s);
+    }
+    var smp: Sample;
+    smp.pos = o + d * (0.5 * (tc + tn));
+    smp.len = tn - tc;
+    smp.dir = d;
+    smp.scalar = s;
+    smp.tau = avg.x;
+    smp.emission = avg.yzw;
+    smp.alpha_scale = 1.0;
+    smp.alpha_mix = 0.0;
+    smp.material = frame.light;
+    if (NEEDS_AUX) {
+        let aux = segment_average(frame.aux.x, frame.aux.y, s_prev, s);
+        smp.importance = aux.x;
+        smp.refraction = aux.y;
+    }
+    if (NEEDS_GRADIENT) {
+        smp.gradient = gradient_levels(lv, blend, smp.pos);
+    }
+    chain_sample(&smp);
+    var shade = 1.0;
+    // A transparent segment adds nothing: no gradient needed.
+    if (SHADING && (smp.tau > 0.0 || smp.alpha_mix > 0.0)) {
+        var g = smp.gradient;
+        if (!NEEDS_GRADIENT) {
+            g = gradient_levels(lv, blend, smp.pos);
+        }
+        shade = phong(g, d, smp.material);
+    }
+    accumulate(acc, segment_optics(smp, shade), smp);
+    return smp;
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg: vec3<u32>,
+        @builtin(num_workgroups) groups: vec3<u32>) {
+    // One workgroup per listed 8×8 tile (`tiles`: the tiles whose rays can
+    // meet data, backend/src/raycast/tiles.rs): its view and place, read
+    // at the workgroup's index, a value a compiler can know to be uniform
+    // across the workgroup.
+    load_constants();
+    let w = wg.x + wg.y * groups.x;
+    if (w >= frame.dispatch.x) {
+        return;
+    }
+    let tile = tile_at(w);
+    let view = view_at(tile.x);
+    let px = pixel_of(view, vec2<u32>(tile.y & 0xFFFFu, tile.y >> 16u) * 8u + lid.xy);
+    if (px.x >= view.size.x || px.y >= view.size.y) {
+        return;
+    }
+    let out = view.size.z + px.y * view.size.x + px.x;
+    let pray = pixel_ray(view, px);
+    var o = pray.o;
+    var d = pray.d;
 
     var acc = Acc(vec3<f32>(0.0), 0.0, 0.0);
     var span = clip_box(o, d, frame.extent.xyz);
@@ -205,27 +437,12 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
         }
         return;
     }
-    // The prediction buffer (B10 §4): a ray that hit the surface last frame
-    // starts a window before that distance (local traversal), one that
-    // missed it steps sparsely (sparse traversal); both step by the voxel
-    // size / κ, κ from the brick's variance (§4.5). No information, or a
-    // full-traversal frame: the normal march.
-    var sparse = false;
     let entry = span.x;
-    // Local traversal starts at the entry of the octree node that holds the
-    // point a window before the last hit: in that node and after it the
-    // samples fall where a full traversal's would.
-    var snap = false;
+    var pb = Predicted(false, false);
     if (predicting && frame.predict.x > 1.5) {
-        let pv = prediction[out];
-        if (pv >= 0.0) {
-            span.x = max(span.x, pv - frame.predict.y);
-            snap = true;
-            sparse = true;
-        } else if (pv == PB_MISS_SURFACE || pv == PB_MISS_BOX) {
-            sparse = true;
-        }
+        pb = predicted_start(out, &span);
     }
+    var snap = pb.snap;
     var hit_t = -1.0;
     var ray: Ray;
     ray.origin = o;
@@ -234,14 +451,14 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     ray.n_breaks = 0u;
     chain_start(&ray);
 
-    let step_factor = frame.render.x;
     // A point on a face belongs to the node the ray is entering: probe a
     // hundredth of a source voxel further along every axis of travel.
     var nudge = sign(d) * frame.render.z;
     var inv_d = 1.0 / select(d, vec3<f32>(1e-30), abs(d) < vec3<f32>(1e-30));
-    var t = span.x;
-    var probe = (o + d * t) / frame.domain.xyz + nudge;
-    var node = 0u;
+    var walk: Walk;
+    walk.t = span.x;
+    walk.probe = (o + d * walk.t) / frame.domain.xyz + nudge;
+    walk.slot = NO_SLOT;
     var s_prev = 0.0;
     var e_prev: TfEnd;
     var have_prev = false;
@@ -250,105 +467,14 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     // Distance travelled before the last refraction bend (the adaptive
     // step's t counts from the eye, not from the bend).
     var t_base = 0.0;
-    // The node the loop is at and its box; `advance`: leave it first (it
-    // has been integrated).
-    var n: IndexNode;
-    var level = 0u;
-    var cell = vec3<f32>(0.0);
-    var lo = vec3<f32>(0.0);
-    var hi = vec3<f32>(0.0);
-    var t_exit = 0.0;
-    var axis = 0u;
-    var last = false;
-    var slot = NO_SLOT;
-    var values = vec2<f32>(0.0);
-    var advance = false;
-    var visited = 0u;
     loop {
-        // Through the nodes with nothing to integrate by traversal alone,
-        // to the next leaf with data (or the end): a CPU device runs the
-        // leaf's whole body below for all its lanes on every pass of the
-        // outer loop, taken or not (docs/figures.md), so passes through
-        // empty space must not include it.
-        var done = false;
-        loop {
-            // The first descent starts at the root, a later one at the
-            // neighbour across the exit face: one descent in the kernel's
-            // code (a CPU device runs every copy of it on every pass).
-            var start = 0u;
-            if (advance) {
-                if (last || terminated(acc)) {
-                    done = true;
-                    break;
-                }
-                // Leave through the exit face and follow its neighbour pointer.
-                let next = neighbour(n, axis, d[axis] > 0.0);
-                if (next == NONE16) {
-                    done = true;
-                    break;
-                }
-                t = t_exit;
-                // Probe just across the exit face, inside this leaf's face on the
-                // other axes: a point the neighbour's box is sure to contain.
-                let eps = frame.render.z;
-                let lo_u = lo / frame.domain.xyz + eps;
-                let hi_u = hi / frame.domain.xyz - eps;
-                probe = clamp((o + d * t) / frame.domain.xyz, lo_u, hi_u);
-                if (d[axis] > 0.0) {
-                    probe[axis] = hi_u[axis] + 2.0 * eps;
-                } else {
-                    probe[axis] = lo_u[axis] - 2.0 * eps;
-                }
-                start = next;
-            }
-            let found = descend(start, clamp(probe, vec3<f32>(0.0), vec3<f32>(0.99999994)));
-            node = found.node;
-            advance = true;
-            visited = visited + 1u;
-            if (visited > MAX_NODES_PER_RAY) {
-                done = true;
-                break;
-            }
-            // `descend` has read the node's first texel.
-            let b = texel_at(frame_table, node_texel(node) + 1u);
-            n = node_of(found.a, b);
-            values = bitcast<vec2<f32>>(b.zw);
-            level = n.data >> 24u;
-            let cells = level_cells(level);
-            let size = frame.domain.xyz / cells;
-            cell = clamp(floor(probe * cells), vec3<f32>(0.0), vec3<f32>(cells - 1.0));
-            lo = cell * size;
-            hi = lo + size;
-            let tx = select(select((lo - o) * inv_d, (hi - o) * inv_d, d > vec3<f32>(0.0)),
-                            vec3<f32>(3.0e38), abs(d) < vec3<f32>(1e-30));
-            t_exit = min(min(tx.x, tx.y), tx.z);
-            axis = 0u;
-            if (tx.y <= tx.x && tx.y <= tx.z) {
-                axis = 1u;
-            } else if (tx.z <= tx.x && tx.z <= tx.y) {
-                axis = 2u;
-            }
-            if (ISO && snap) {
-                let te = select((hi - o) * inv_d, (lo - o) * inv_d, d > vec3<f32>(0.0));
-                let te_m = select(te, vec3<f32>(-3.0e38), abs(d) < vec3<f32>(1e-30));
-                t = clamp(max(max(te_m.x, te_m.y), te_m.z), entry, t);
-                snap = false;
-            }
-            last = t_exit >= span.y;
-            t_exit = clamp(t_exit, t, span.y);
-
-            slot = n.data & NO_SLOT;
-            if (slot != NO_SLOT && t_exit > t) {
-                break;
-            }
-            // Nothing to integrate here; the next brick restarts its segment.
-            have_prev = false;
-        }
-        if (done) {
+        if (!next_leaf(&walk, o, d, inv_d, span.y, entry, acc, &snap, &have_prev)) {
             break;
         }
+        let t = walk.t;
+        let t_exit = walk.t_exit;
         var bent = false;
-        let leaf = make_leaf(node, level, cell, slot, values);
+        let leaf = make_leaf(walk.node, walk.level, walk.cell, walk.slot, walk.values);
         // Multilevel sampling blends in coarser levels only in leaves
         // that the view needs coarser somewhere along the ray (the
         // footprint grows monotonically along a ray from the observer;
@@ -357,52 +483,19 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
         var lv = Levels(leaf, leaf, leaf);
         var blend = false;
         if (MULTILEVEL && !ISO) {
-            lv = levels_of(leaf, n);
+            lv = levels_of(leaf, walk.n);
             blend = lv.up.slot != NO_SLOT
-                && max(lod_offset(level, o + d * t), lod_offset(level, o + d * t_exit)) > 0.0;
+                && max(lod_offset(walk.level, o + d * t), lod_offset(walk.level, o + d * t_exit)) > 0.0;
         }
-        // Sampling rate matched to the leaf's level.
-        let voxel = min(min(leaf.voxel.x, leaf.voxel.y), leaf.voxel.z);
-        var h = step_factor * voxel;
-        if (frame.render.w > 0.5) {
-            // L12 §4.4 Eq. 3: λ = t·sin(θ/2), the radius of the pixel's
-            // cone at distance t from the eye (data units, as the ray's
-            // parameter), taken at the leaf's entry so that the samples
-            // of a leaf stay evenly spaced; step_factor 0.5 is λ itself.
-            h = max(2.0 * step_factor * (t_base + t) * sin_half, voxel / 64.0);
-        }
-        if (ISO && sparse) {
-            h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slot_range(slot).z));
-        }
+        let h = leaf_step(leaf, t_base + t, pray.sin_half, pb.sparse);
         // Samples fall at t + k·h (and where the leaf ends or a tool's
         // boundary lies).
         var tc = t;
         var k = 1u;
-        // Macrocells: whether the first sample taken only starts the
-        // march (its segment lies in empty cells).
+        // Whether the first sample taken only starts the march.
         var skip_first = false;
         if (MACROCELLS && !blend) {
-            // Segments inside empty macrocells add exactly nothing: march
-            // only from the last sample before the first non-empty cell,
-            // on the same grid (the samples computed by the same
-            // expressions, so the image is bit for bit the one without
-            // macrocells).
-            let start = cells_start(leaf, o, d, inv_d, t, t_exit);
-            if (start > 1.0e38) {
-                // Every cell it crosses is empty: only the value at the
-                // exit is needed, for the next leaf's first segment.
-                k = 0xFFFFFFFFu;
-                skip_first = true;
-            } else {
-                var k0 = floor((start - t) / h);
-                if (k0 >= 1.0 && t + k0 * h > start) {
-                    k0 = k0 - 1.0;
-                }
-                if (k0 >= 1.0) {
-                    k = u32(k0);
-                    skip_first = true;
-                }
-            }
+            skip_first = cells_skip(leaf, o, d, inv_d, t, t_exit, h, &k);
         }
         if (!have_prev && !skip_first) {
             // The leaf's entry value starts the march, at t + 0·h.
@@ -473,42 +566,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 continue;
             }
             if (ISO) {
-                // The first crossing of the isovalue, opaque and shaded;
-                // a tool may cut it away (opacity 0) or fade it.
-                if (iso_brackets(s_prev, s)) {
-                    let th = iso_refine(leaf, o, d, tc, tn, s_prev);
-                    var smp: Sample;
-                    smp.pos = o + d * th;
-                    smp.len = 0.0;
-                    smp.dir = d;
-                    smp.scalar = frame.iso.x;
-                    smp.tau = 1.0;
-                    smp.emission = frame.iso.yzw;
-                    smp.alpha_scale = 1.0;
-                    smp.alpha_mix = 0.0;
-                    smp.material = frame.light;
-                    if (NEEDS_GRADIENT) {
-                        smp.gradient = gradient(leaf, smp.pos);
-                    }
-                    chain_sample(&smp);
-                    let a = clamp(mix(smp.alpha_scale, 1.0, smp.alpha_mix), 0.0, 1.0);
-                    if (a > 0.0) {
-                        var shade = 1.0;
-                        if (SHADING) {
-                            let g = gradient(leaf, smp.pos);
-                            let gl = length(g);
-                            if (gl > 1e-6) {
-                                let diff = abs(dot(g / gl, d));
-                                let m = smp.material;
-                                shade = m.x + m.y * diff + m.z * pow(diff, m.w);
-                            }
-                        }
-                        over(&acc, vec4<f32>(max(smp.emission, vec3<f32>(0.0)) * shade * a, a));
-                        if (hit_t < 0.0) {
-                            hit_t = th;
-                        }
-                    }
-                }
+                iso_hit(&acc, &hit_t, leaf, o, d, tc, tn, s_prev, s);
                 s_prev = s;
                 tc = tn;
                 if (tc >= t_exit || terminated(acc)) {
@@ -516,67 +574,14 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 }
                 continue;
             }
-            var avg: vec4<f32>;
-            if (ANALYTIC_PREINT) {
-                avg = analytic_average(s_prev, s);
-            } else if (GRID_PREINT) {
-                avg = grid_average(s_prev, s);
-            } else if (END_PREINT) {
-                avg = end_average(e_prev, e);
-            } else {
-                avg = segment_average(0u, frame.counts.w, s_prev, s);
-            }
-            var smp: Sample;
-            smp.pos = o + d * (0.5 * (tc + tn));
-            smp.len = tn - tc;
-            smp.dir = d;
-            smp.scalar = s;
-            smp.tau = avg.x;
-            smp.emission = avg.yzw;
-            smp.alpha_scale = 1.0;
-            smp.alpha_mix = 0.0;
-            smp.material = frame.light;
-            if (NEEDS_AUX) {
-                let aux = segment_average(frame.aux.x, frame.aux.y, s_prev, s);
-                smp.importance = aux.x;
-                smp.refraction = aux.y;
-            }
-            if (NEEDS_GRADIENT) {
-                smp.gradient = gradient_levels(lv, blend, smp.pos);
-            }
-            chain_sample(&smp);
-            var shade = 1.0;
-            // A transparent segment adds nothing: no gradient needed.
-            if (SHADING && (smp.tau > 0.0 || smp.alpha_mix > 0.0)) {
-                var g = smp.gradient;
-                if (!NEEDS_GRADIENT) {
-                    g = gradient_levels(lv, blend, smp.pos);
-                }
-                let gl = length(g);
-                if (gl > 1e-6) {
-                    // Two-sided Phong with a headlight.
-                    let diff = abs(dot(g / gl, d));
-                    let m = smp.material;
-                    shade = m.x + m.y * diff + m.z * pow(diff, m.w);
-                }
-            }
-            accumulate(&acc, segment_optics(smp, shade), smp);
+            let smp = composite_segment(&acc, lv, blend, o, d, tc, tn, s_prev, s, e_prev, e);
             s_prev = s;
             e_prev = e;
             tc = tn;
             if (REFRACTION) {
-                // Snell's law where the refraction index changes, about
-                // the gradient at the end of the segment; the ray then
-                // goes on from there in its new direction.
-                if (nu_prev >= 0.0 && abs(smp.refraction - nu_prev) > 1e-6) {
-                    let p = o + d * tc;
-                    let nd = snell(d, gradient(leaf, p), nu_prev, smp.refraction);
-                    if (any(nd != d)) {
-                        t_base = t_base + tc;
-                        o = p;
-                        d = nd;
-                        bent = true;
-                    }
+                bent = bend_at(leaf, &o, &d, tc, nu_prev, smp.refraction);
+                if (bent) {
+                    t_base = t_base + tc;
                 }
                 nu_prev = smp.refraction;
             }
@@ -585,7 +590,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             }
         }
         // Visibility feedback (G10 §5): this leaf contributed.
-        feedback[node] = 1u;
+        feedback[walk.node] = 1u;
         if (REFRACTION && bent) {
             // Start again from the bend: a new straight ray inside the same
             // leaf (rays that leave the volume go on straight).
@@ -595,21 +600,21 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             if (span.y <= 0.0 || terminated(acc)) {
                 break;
             }
-            t = 0.0;
+            walk.t = 0.0;
             ray.origin = o;
             ray.dir = d;
             ray.t_end = span.y;
             ray.n_breaks = 0u;
             chain_start(&ray);
-            probe = o / frame.domain.xyz + nudge;
-            advance = false;
+            walk.probe = o / frame.domain.xyz + nudge;
+            walk.advance = false;
             continue;
         }
         // Ended here: leave the loop now, not at the top of another pass.
         // A CPU device runs a loop's whole body, masked, until no lane is
         // left in it; with the test at the top of the next pass, every
         // group of rays paid one such pass after its last ray had ended.
-        if (last || terminated(acc)) {
+        if (walk.last || terminated(acc)) {
             break;
         }
     }

@@ -1,4 +1,4 @@
-//! Starting a session (DESIGN.md "Process model"). Under `mpirun -n K`,
+//! Starting a session (docs/design.md "Process model"). Under `mpirun -n K`,
 //! rank 0 coordinates and ranks 1…K−1 render; otherwise (or with one MPI
 //! process) the back ends are threads of this process and talk to the
 //! coordinator through the same protocol. Both `render` and `serve` start
@@ -26,15 +26,46 @@ pub fn session(
     backends: Option<usize>,
     coordinate: impl FnOnce(&mut dyn Transport) -> Result<()>,
 ) -> Result<Role> {
-    if parallax_frontend::cluster::launched_by_mpi() {
-        return mpi_session(coordinate);
+    let launched = parallax_frontend::cluster::launched_by_mpi();
+    match plan(launched, backends, || display_ranks(scene, display))? {
+        Plan::Mpi => mpi_session(coordinate),
+        Plan::Embedded { backends } => {
+            embedded(backends, coordinate)?;
+            Ok(Role::Coordinator)
+        }
     }
-    let n = match backends {
+}
+
+/// How a session runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Plan {
+    /// Under `mpirun`: rank 0 coordinates, the other ranks render (one
+    /// MPI process alone falls back to one embedded back end).
+    Mpi,
+    /// Back-end threads of this process.
+    Embedded { backends: usize },
+}
+
+/// The plan of a session: MPI when `mpirun` started this process (the
+/// launcher then sets the ranks and `--backends` is not used), otherwise
+/// `backends` embedded back ends, by default the `display_ranks` the
+/// display asks for (read only when needed).
+pub fn plan(
+    launched_by_mpi: bool,
+    backends: Option<usize>,
+    display_ranks: impl FnOnce() -> Result<usize>,
+) -> Result<Plan> {
+    if launched_by_mpi {
+        return Ok(Plan::Mpi);
+    }
+    let backends = match backends {
         Some(n) => n,
-        None => display_ranks(scene, display)?,
+        None => display_ranks()?,
     };
-    embedded(n, coordinate)?;
-    Ok(Role::Coordinator)
+    if backends == 0 {
+        bail!("--backends 0: at least one back end is needed");
+    }
+    Ok(Plan::Embedded { backends })
 }
 
 /// The cluster mode, under `mpirun -n K` (one MPI process alone runs the
@@ -176,4 +207,27 @@ pub fn eye_view(
     let img = simulate::simulate(display, &linear, eye, res)?;
     let rgb = parallax_backend::output::rgb8(&img);
     Ok((res[0], res[1], rgb))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{plan, Plan};
+
+    #[test]
+    fn sessions_are_planned_from_the_launcher_the_flag_and_the_display() {
+        let unread = || -> anyhow::Result<usize> { panic!("the display is not needed") };
+        assert_eq!(plan(true, Some(3), unread).unwrap(), Plan::Mpi);
+        assert_eq!(
+            plan(false, Some(3), unread).unwrap(),
+            Plan::Embedded { backends: 3 }
+        );
+        assert_eq!(
+            plan(false, None, || Ok(4)).unwrap(),
+            Plan::Embedded { backends: 4 }
+        );
+        let e = plan(false, Some(0), unread).unwrap_err().to_string();
+        assert!(e.contains("--backends 0"), "{e}");
+        let e = plan(false, None, || anyhow::bail!("display.toml: no projectors"));
+        assert!(e.unwrap_err().to_string().contains("display.toml"));
+    }
 }

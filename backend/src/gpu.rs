@@ -185,7 +185,7 @@ pub fn choose_adapter(adapters: &[AdapterDesc], req: &AdapterRequest) -> Result<
 /// the integer path rounds the interpolation weights to 8 bits, an error
 /// the float pool does not have, and was not faster (the brain's 4 mm
 /// partner on 8-bit bricks took 0.93 of its time with the float path;
-/// docs/figures.md, "Filtering 8-bit bricks in float").
+/// docs/performance.md, "lavapipe's float path for 8-bit bricks").
 ///
 /// It only sets environment variables the driver reads when it starts;
 /// other adapters ignore them. Call it first thing in `main`, before any

@@ -2,11 +2,12 @@
 //! data (volume input) → store (octree import and reading) → reference
 //! (the exact integral every image is measured against).
 
-pub mod bench;
 pub mod data;
+pub mod geometry;
 pub mod gpu;
 pub mod index;
 pub mod loader;
+pub mod metric;
 pub mod node;
 pub mod output;
 pub mod pick;

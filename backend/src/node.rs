@@ -1,6 +1,6 @@
 //! A back-end process (or thread): receives the front end's messages,
 //! renders its projectors' views each frame, writes their images, replies
-//! with the frame's figures (DESIGN.md "Process model").
+//! with the frame's figures (docs/design.md "Process model").
 
 use crate::output;
 use crate::render::Renderer;

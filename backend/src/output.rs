@@ -1,4 +1,4 @@
-//! Images as files (DESIGN.md "Command line"): PNG for people (sRGB, the
+//! Images as files (docs/design.md "Command line"): PNG for people (sRGB, the
 //! premultiplied colour over black, as a display shows emission), and `.npy`
 //! (float32, H×W×4, linear, premultiplied) for the exact output.
 

@@ -1,5 +1,5 @@
 //! The reference integrator: the exact emission–absorption integral of
-//! DESIGN.md "What a pixel means", in f64, on the raw volume (not the octree).
+//! docs/design.md "What a pixel means", in f64, on the raw volume (not the octree).
 //! Every image the renderer makes is measured against it.
 //!
 //! Along a ray the field s(t) (trilinear, clamped to the edge voxels) is a

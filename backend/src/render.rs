@@ -58,7 +58,7 @@ pub struct Renderer {
     /// the read-back ([`ViewHistory`]). The same filter either way. On by
     /// default except on a CPU device, where the GPU's share of the cores
     /// is the CPU filter's, and the CPU filter is a little cheaper
-    /// (docs/figures.md, "Frame reconstruction").
+    /// (docs/performance.md, "Frame reconstruction").
     pub reconstruct_on_gpu: bool,
     /// The stored bricks' smallest and largest variance (B10 §4.5).
     variance_range: (f32, f32),
@@ -361,14 +361,13 @@ impl Renderer {
     }
 
     fn geometry(&self, placement: &Placement) -> SceneGeometry {
-        SceneGeometry {
-            placement: *placement,
-            layout: *self.db.layout(),
-            spacing: self.db.header.info.spacing,
-        }
+        SceneGeometry::new(*placement, *self.db.layout(), self.db.header.info.spacing)
     }
 
-    /// Renders one frame of `views`.
+    /// Renders one frame of `views`, in G10 §5's stages: refine the cut
+    /// with the visibility feedback, upload what it needs, build the
+    /// spatial index, ray cast every view in one dispatch, keep the
+    /// feedback for the next frame, and reconstruct the frame.
     pub fn frame(
         &mut self,
         frame: u64,
@@ -382,8 +381,7 @@ impl Renderer {
                 tf.table.build_grid(&self.gpu, &tf.preint);
             }
         }
-        let tf = self
-            .tf
+        self.tf
             .as_ref()
             .context("render: no transfer function set")?;
         let mut stats = FrameStats {
@@ -396,6 +394,97 @@ impl Renderer {
         }
         self.loader.set_accuracy(cfg.accuracy);
         let t = Instant::now();
+        let cut = self.refine(frame, views, placement, cfg)?;
+        // A brick that fails its read or checksum is not fatal: the loader
+        // never asks for it again and its parent stays a leaf (G08 §4 never
+        // blocks on data); the frame names it.
+        stats.bad_bricks = self.loader.errors();
+        for b in &stats.bad_bricks {
+            tracing::warn!("{b}: its parent stays a leaf");
+        }
+        stats.refine_ms = ms(t);
+
+        let t = Instant::now();
+        self.upload(&cut, cfg)?;
+        stats.upload_ms = ms(t);
+
+        let t = Instant::now();
+        let s = &self.db.summary;
+        let index = SpatialIndex::build(self.db.layout(), &cut.cut, (s.value_min, s.value_max))?;
+        stats.index_ms = ms(t);
+
+        let scene = self.geometry(placement);
+        let mut settings = self.settings(placement, cfg);
+        let continues = self.continue_history(frame, placement, views, cfg, &mut settings);
+        let pb_next = self.plan_prediction(placement, views, cfg, &mut settings);
+        let t = Instant::now();
+        let tf = self
+            .tf
+            .as_ref()
+            .context("render: no transfer function set")?;
+        let out = self.raycaster.render(
+            &self.gpu,
+            &RenderInputs {
+                pool: &self.pool,
+                index: &index,
+                tf: &tf.table,
+                scene: &scene,
+                views,
+                settings: &settings,
+            },
+        )?;
+        stats.render_ms = ms(t);
+        stats.samples = out.samples;
+        stats.tiles = out.tiles;
+        stats.tiles_ms = out.tiles_seconds * 1e3;
+
+        // Visible nodes of this frame's feedback, pulled up to inner nodes
+        // by the loader at the next refinement (G10 §5).
+        stats.visible = out.feedback.iter().filter(|&&v| v != 0).count() as u64;
+        self.cut_stats(&cut.stats, &mut stats);
+        let predicted = settings.predict[0] > 1.5 && !out.prediction_reset;
+        // A predicted frame's rays skip what lies before their last hit, so
+        // its feedback under-reports: the loader keeps the last full
+        // traversal's.
+        if !predicted {
+            self.last.push_back((index, out.feedback));
+        }
+        self.prediction = pb_next.map(|(k, since)| (k, if predicted { since } else { 0 }));
+        let images = if cfg.reconstruction && self.reconstruct_on_gpu {
+            out.images
+        } else if cfg.reconstruction {
+            let t = Instant::now();
+            let images = self.reconstruct(frame, views, continues, out.images);
+            stats.reconstruct_ms = ms(t);
+            images
+        } else {
+            self.history.clear();
+            self.history_key = None;
+            out.images
+        };
+        stats.total_ms = ms(start);
+        Ok(Frame {
+            images,
+            stats,
+            predicted,
+        })
+    }
+
+    /// Refines the cut for this frame's views (G08 §4, G10 §5) with the
+    /// visibility feedback of the last frame, or of the last four
+    /// sub-frames with reconstruction (a node is invisible only if they all
+    /// missed it).
+    fn refine(
+        &mut self,
+        frame: u64,
+        views: &[View],
+        placement: &Placement,
+        cfg: &RenderConfig,
+    ) -> Result<crate::loader::FrameCut> {
+        let tf = self
+            .tf
+            .as_ref()
+            .context("render: no transfer function set")?;
         let table = if cfg.refraction {
             &tf.empty_refraction
         } else {
@@ -408,8 +497,6 @@ impl Renderer {
             Some(v) => !(lo as f64 <= v && v <= hi as f64),
             None => table.is_empty(lo as f64, hi as f64),
         };
-        // With reconstruction, a node is invisible only if the last four
-        // sub-frames all missed it.
         let keep = if cfg.reconstruction {
             SUBFRAMES as usize
         } else {
@@ -426,13 +513,6 @@ impl Renderer {
         let cut = self
             .loader
             .update_with_feedbacks(views, placement, &empty, &feedbacks);
-        // A brick that fails its read or checksum is not fatal: the loader
-        // never asks for it again and its parent stays a leaf (G08 §4 never
-        // blocks on data); the frame names it.
-        stats.bad_bricks = self.loader.errors();
-        for b in &stats.bad_bricks {
-            tracing::warn!("{b}: its parent stays a leaf");
-        }
         tracing::debug!(
             frame,
             nodes = cut.stats.nodes,
@@ -444,9 +524,16 @@ impl Renderer {
             held_back = ?cut.stats.held_back,
             "cut refined"
         );
-        stats.refine_ms = ms(t);
+        Ok(cut)
+    }
 
-        let t = Instant::now();
+    /// Uploads the cut's new bricks to the pool with their variance (for
+    /// the prediction buffer's κ), and marks their empty macrocells.
+    fn upload(&mut self, cut: &crate::loader::FrameCut, cfg: &RenderConfig) -> Result<()> {
+        let tf = self
+            .tf
+            .as_ref()
+            .context("render: no transfer function set")?;
         let (v_lo, v_hi) = self.variance_range;
         for u in &cut.uploads {
             let v = self.db.node(u.key).map_or(0.0, |n| n.variance);
@@ -476,88 +563,84 @@ impl Renderer {
                 .mark_all_cells(&|lo, hi| tf.empty.is_empty(lo, hi));
         }
         self.pool.flush_cells(&self.gpu);
-        stats.upload_ms = ms(t);
+        Ok(())
+    }
 
-        let t = Instant::now();
-        let s = &self.db.summary;
-        let index = SpatialIndex::build(self.db.layout(), &cut.cut, (s.value_min, s.value_max))?;
-        stats.index_ms = ms(t);
-
-        let scene = self.geometry(placement);
-        let mut settings = self.settings(placement, cfg);
-        // Frame reconstruction: whether this frame continues the history
-        // (the views, render settings, transfer function and tools the
-        // same, the placement moved, not jumped).
-        let mut continues = false;
-        if cfg.reconstruction {
-            settings.subframe = Some(subframe_of(frame));
-            let key = HistoryKey {
-                views: views.to_vec(),
-                cfg: cfg.clone(),
-                tf: self.tf_version(),
-                tools: self.tools.0,
-                placement: *placement,
-            };
-            continues = self.history_key.as_ref().is_some_and(|k| k.continues(&key));
-            self.history_key = Some(key);
-            if self.reconstruct_on_gpu {
-                self.history.clear();
-                settings.reconstruct = Some(!continues);
-            }
+    /// Frame reconstruction: whether this frame continues the history (the
+    /// views, render settings, transfer function and tools the same, the
+    /// placement moved, not jumped), and its sub-frame.
+    fn continue_history(
+        &mut self,
+        frame: u64,
+        placement: &Placement,
+        views: &[View],
+        cfg: &RenderConfig,
+        settings: &mut RenderSettings,
+    ) -> bool {
+        if !cfg.reconstruction {
+            return false;
         }
-        // The prediction buffer (B10 §4): a full traversal when its
-        // contents do not belong to this view, and every α frames.
-        let mut pb_next = None;
-        if cfg.mode == Mode::Iso && cfg.prediction {
-            let key = HistoryKey {
-                views: views.to_vec(),
-                cfg: cfg.clone(),
-                tf: None,
-                tools: self.tools.0,
-                placement: *placement,
-            };
-            let since = match &self.prediction {
-                Some((k, c)) if k.continues(&key) && c + 1 < cfg.full_traversal_every => c + 1,
-                _ => 0,
-            };
-            let window = PREDICTION_WINDOW_VOXELS
-                * self
-                    .db
-                    .header
-                    .info
-                    .spacing
-                    .iter()
-                    .cloned()
-                    .fold(f64::INFINITY, f64::min);
-            settings.predict = [
-                if since == 0 { 1.0 } else { 2.0 },
-                window as f32,
-                cfg.kappa[0] as f32,
-                cfg.kappa[1] as f32,
-            ];
-            pb_next = Some((key, since));
+        settings.subframe = Some(subframe_of(frame));
+        let key = HistoryKey {
+            views: views.to_vec(),
+            cfg: cfg.clone(),
+            tf: self.tf_version(),
+            tools: self.tools.0,
+            placement: *placement,
+        };
+        let continues = self.history_key.as_ref().is_some_and(|k| k.continues(&key));
+        self.history_key = Some(key);
+        if self.reconstruct_on_gpu {
+            self.history.clear();
+            settings.reconstruct = Some(!continues);
         }
-        let t = Instant::now();
-        let out = self.raycaster.render(
-            &self.gpu,
-            &RenderInputs {
-                pool: &self.pool,
-                index: &index,
-                tf: &tf.table,
-                scene: &scene,
-                views,
-                settings: &settings,
-            },
-        )?;
-        stats.render_ms = ms(t);
-        stats.samples = out.samples;
-        stats.tiles = out.tiles;
-        stats.tiles_ms = out.tiles_seconds * 1e3;
+        continues
+    }
 
-        // Visible nodes of this frame's feedback, pulled up to inner nodes
-        // by the loader at the next refinement (G10 §5).
-        stats.visible = out.feedback.iter().filter(|&&v| v != 0).count() as u64;
-        let c = &cut.stats;
+    /// The prediction buffer (B10 §4): a full traversal when its contents
+    /// do not belong to this view, and every α frames. Returns the key and
+    /// frame count the next frame continues from.
+    fn plan_prediction(
+        &self,
+        placement: &Placement,
+        views: &[View],
+        cfg: &RenderConfig,
+        settings: &mut RenderSettings,
+    ) -> Option<(HistoryKey, u32)> {
+        if cfg.mode != Mode::Iso || !cfg.prediction {
+            return None;
+        }
+        let key = HistoryKey {
+            views: views.to_vec(),
+            cfg: cfg.clone(),
+            tf: None,
+            tools: self.tools.0,
+            placement: *placement,
+        };
+        let since = match &self.prediction {
+            Some((k, c)) if k.continues(&key) && c + 1 < cfg.full_traversal_every => c + 1,
+            _ => 0,
+        };
+        let window = PREDICTION_WINDOW_VOXELS
+            * self
+                .db
+                .header
+                .info
+                .spacing
+                .iter()
+                .cloned()
+                .fold(f64::INFINITY, f64::min);
+        settings.predict = [
+            if since == 0 { 1.0 } else { 2.0 },
+            window as f32,
+            cfg.kappa[0] as f32,
+            cfg.kappa[1] as f32,
+        ];
+        Some((key, since))
+    }
+
+    /// The cut's figures in the frame's statistics.
+    fn cut_stats(&self, c: &crate::loader::CutStats, stats: &mut FrameStats) {
         stats.cut_nodes = c.nodes as u64;
         stats.cut_leaves_with_data = c.leaves_with_data as u64;
         stats.resident = c.gpu_resident as u64;
@@ -569,32 +652,6 @@ impl Renderer {
         stats.cpu_bytes = c.cpu_bytes;
         stats.adequate = c.adequate && c.requested == 0 && self.loader.in_flight() == 0;
         stats.held_back = c.held_back.iter().copied().collect();
-        let predicted = settings.predict[0] > 1.5 && !out.prediction_reset;
-        // A predicted frame's rays skip what lies before their last hit, so
-        // its feedback under-reports: the loader keeps the last full
-        // traversal's.
-        if !predicted {
-            self.last.push_back((index, out.feedback));
-        }
-        self.prediction = pb_next.map(|(k, since)| (k, if predicted { since } else { 0 }));
-        let images = if cfg.reconstruction && self.reconstruct_on_gpu {
-            out.images
-        } else if cfg.reconstruction {
-            let t = Instant::now();
-            let images = self.reconstruct(frame, views, continues, out.images);
-            stats.reconstruct_ms = ms(t);
-            images
-        } else {
-            self.history.clear();
-            self.history_key = None;
-            out.images
-        };
-        stats.total_ms = ms(start);
-        Ok(Frame {
-            images,
-            stats,
-            predicted,
-        })
     }
 
     /// Frame reconstruction (G10 §5) on the CPU: the rendered sub-frame

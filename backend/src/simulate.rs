@@ -102,7 +102,7 @@ struct Beam<'a> {
 /// The simulated view and which of its pixels are lit.
 ///
 /// Output pixel (i, j) is the screen point Q = (x0 + (i+½)/W·w,
-/// y0 + h − (j+½)/H·h, 0) of the whole screen (DESIGN.md "Which ray a pixel
+/// y0 + h − (j+½)/H·h, 0) of the whole screen (docs/design.md "Which ray a pixel
 /// gets"). For each projector E_p whose region holds Q and which is on the
 /// other side of the screen from the eye (the screen transmits: a beam
 /// E_p→Q continues beyond Q), δ_p is the horizontal angle (x–z plane)

@@ -1,8 +1,8 @@
 //! Scalar volumes as the rest of Parallax sees them: a grid of data values with
 //! voxel spacing, read slice by slice so that nothing needs the whole volume in
-//! memory (DESIGN.md "Data").
+//! memory (docs/design.md "Data").
 //!
-//! Volume space (DESIGN.md conventions): voxel (i, j, k) has its centre at
+//! Volume space (docs/design.md conventions): voxel (i, j, k) has its centre at
 //! ((i+½)·sx, (j+½)·sy, (k+½)·sz); the volume is the box [0, N·s] on each axis;
 //! the field is the trilinear interpolant of the voxel values, clamped to the
 //! edge voxels inside the box.
@@ -98,6 +98,13 @@ pub struct VolumeInfo {
     pub voxel_type: VoxelType,
 }
 
+/// The extent N·s of `dims` voxels of `spacing` on each axis (data length
+/// units): the one computation of a volume's box, for the source volume
+/// ([`VolumeInfo::extent`]) and for its octree ([`crate::geometry::Geometry`]).
+pub fn extent(dims: [usize; 3], spacing: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|a| dims[a] as f64 * spacing[a])
+}
+
 impl VolumeInfo {
     pub fn voxel_count(&self) -> u64 {
         self.dims.iter().map(|&d| d as u64).product()
@@ -109,11 +116,7 @@ impl VolumeInfo {
 
     /// The volume's extent N·s on each axis (data length units).
     pub fn extent(&self) -> [f64; 3] {
-        [
-            self.dims[0] as f64 * self.spacing[0],
-            self.dims[1] as f64 * self.spacing[1],
-            self.dims[2] as f64 * self.spacing[2],
-        ]
+        extent(self.dims, self.spacing)
     }
 
     /// Bytes of the source data (for throughput and compression ratios).
@@ -205,7 +208,7 @@ impl Volume {
     }
 
     /// The scalar field at a point of volume space: the trilinear interpolant
-    /// of the voxel values, clamped to the edge voxels (DESIGN.md). Voxels
+    /// of the voxel values, clamped to the edge voxels (docs/design.md). Voxels
     /// without data (NaN) are left out: the weights of the others are
     /// renormalised, and where all eight are NaN the result is NaN (no data).
     pub fn sample(&self, p: [f64; 3]) -> f64 {

@@ -79,15 +79,15 @@ fn full_cut(
 }
 
 fn scene(db: &OctreeDb) -> SceneGeometry {
-    SceneGeometry {
-        placement: Placement {
+    SceneGeometry::new(
+        Placement {
             center: [0.0, 0.0, 0.0],
             rotation_deg: [20.0, 35.0, 0.0],
             size: 0.3,
         },
-        layout: *db.layout(),
-        spacing: db.header.info.spacing,
-    }
+        *db.layout(),
+        db.header.info.spacing,
+    )
 }
 
 /// A full-detail render of the standard test view against the reference
@@ -272,15 +272,15 @@ fn traversal_covers_every_path_exactly_once() {
         [45.0, 45.0, 45.0],
         [0.0, 90.0, 0.0],
     ] {
-        let sc = SceneGeometry {
-            placement: Placement {
+        let sc = SceneGeometry::new(
+            Placement {
                 center: [0.0, 0.0, 0.0],
                 rotation_deg: rot,
                 size: 0.3,
             },
-            layout: *db.layout(),
-            spacing: db.header.info.spacing,
-        };
+            *db.layout(),
+            db.header.info.spacing,
+        );
         let view = View::window([48, 40], [0.4, 0.33], [0.03, -0.02, 0.7]);
         let out = rc
             .render(

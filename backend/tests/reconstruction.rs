@@ -5,7 +5,7 @@
 
 mod support;
 
-use parallax_backend::bench::image_error;
+use parallax_backend::metric::{as_reference, image_error};
 use parallax_backend::render::Renderer;
 use parallax_backend::store::BrickEncoding;
 use parallax_common::camera::{Placement, View};
@@ -29,8 +29,7 @@ fn placement(turn: f64) -> Placement {
 }
 
 fn psnr(img: &[[f32; 4]], reference: &[[f32; 4]]) -> f64 {
-    let r: Vec<[f64; 4]> = reference.iter().map(|p| p.map(|v| v as f64)).collect();
-    image_error(img, &r).2
+    image_error(img, &as_reference(reference)).psnr_db
 }
 
 #[test]

@@ -1,4 +1,4 @@
-//! The reference integrator against closed-form answers (DESIGN.md "What a
+//! The reference integrator against closed-form answers (docs/design.md "What a
 //! pixel means") and against brute-force quadrature.
 
 use glam::DVec3;

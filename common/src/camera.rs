@@ -1,13 +1,13 @@
 //! Where a pixel's ray comes from: the scene placement (display space ↔
 //! volume space) and the multiple-centre-of-projection ray of G10 §4 Eq. 1
-//! (DESIGN.md "Which ray a pixel gets").
+//! (docs/design.md "Which ray a pixel gets").
 
 use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
 /// Where the volume's box sits in display space (metres): a volume point p
 /// maps to center + R·(size / max(N·s))·(p − N·s/2), R rotating about x, then
-/// y, then z (fixed axes) (DESIGN.md "Volume space").
+/// y, then z (fixed axes) (docs/design.md "Volume space").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Placement {
     pub center: [f64; 3],

@@ -1,4 +1,4 @@
-//! Scene and display files (DESIGN.md "Command line", "Display
+//! Scene and display files (docs/design.md "Command line", "Display
 //! configuration"). Every error names the file and the field.
 
 use crate::camera::{Placement, View, MAX_VIEW_SIDE};
@@ -129,7 +129,7 @@ pub struct RenderConfig {
     /// exact for the linear scalar between samples) or "2d" (the classic 2D
     /// table over front and back values, Engel et al. 2001, at most 512²
     /// nodes, bilinear: one texture fetch a sample, faster on devices where
-    /// table reads are dear; its error is in `parallax bench`'s
+    /// table reads are dear; its error is in `parallax bench sweep`'s
     /// work–precision table). "2d" needs filterable f32 textures and falls
     /// back to "exact" without them. "analytic": the exact integral again,
     /// computed per segment in closed form from the transfer function's
@@ -138,9 +138,10 @@ pub struct RenderConfig {
     /// where a texture read is a gather per channel and lane, it beats
     /// "2d" for a few (the Colin27 brain's 4: 0.86–0.91 of the frame time)
     /// and may lose for many (the CT-Bone preset's 12: 0.96 at a fine
-    /// step, 1.24 at a coarse one), docs/figures.md. A
-    /// function with more than 16 such pieces over the data range (or
-    /// extinctions too large for f32 sums) is looked up as with "2d".
+    /// step, 1.24 at a coarse one), docs/performance.md "Pre-integration
+    /// per case". A function with more than 16 such pieces over the data
+    /// range (or extinctions too large for f32 sums) is looked up as with
+    /// "2d".
     #[serde(default = "exact")]
     pub preintegration: Preintegration,
 }
@@ -171,7 +172,8 @@ fn trilinear() -> Filter {
 
 /// B10 found κ = 0.1…0.3 (steps of 3–10 voxels) good on its data; on the
 /// noisy skin of an MRI that costs 25 dB against full traversal, 0.5…1
-/// (steps of 1–2 voxels) keeps 33 dB at a 2.3× speed-up (docs/figures.md).
+/// (steps of 1–2 voxels) keeps 33 dB at a 2.3× speed-up (docs/performance.md,
+/// "Isosurfaces and the prediction buffer").
 fn default_kappa() -> [f64; 2] {
     [0.5, 1.0]
 }
@@ -203,7 +205,7 @@ fn one() -> f64 {
 fn half() -> f64 {
     0.5
 }
-/// 0.999: its error (RMSE 2.5e-4 on Colin27 in `parallax bench`) stays
+/// 0.999: its error (RMSE 2.5e-4 on Colin27 in `parallax bench sweep`) stays
 /// below the default step's (2.9e-4); 0.99 cost 3.1e-3, ten times more.
 fn early() -> f64 {
     0.999
@@ -383,7 +385,7 @@ pub struct Observer {
 
 /// `[observer]` as written in a file. The projector list may also stand
 /// here: in TOML, a `projectors = …` line written after `[observer]` belongs
-/// to that table (as in the DESIGN.md example).
+/// to that table (as in the docs/design.md example).
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ObserverFile {

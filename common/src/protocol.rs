@@ -1,4 +1,4 @@
-//! What the front end and the back ends say to each other (DESIGN.md
+//! What the front end and the back ends say to each other (docs/design.md
 //! "Process model"): small per-frame state broadcast to every back end, a
 //! stats reply from each, and the large state (scene, display, transfer
 //! function) sent once and again only when it changes. Messages travel as
@@ -153,7 +153,7 @@ pub struct FrameStats {
 }
 
 /// A limit that stopped refinement short of adequate, which the user can
-/// raise (DESIGN.md "Working set": refinement stops when the pool is full).
+/// raise (docs/design.md "Working set": refinement stops when the pool is full).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum HeldBack {

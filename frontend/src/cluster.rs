@@ -1,4 +1,4 @@
-//! The MPI transport (DESIGN.md "Process model"): rank 0 is the front end,
+//! The MPI transport (docs/design.md "Process model"): rank 0 is the front end,
 //! ranks 1…K−1 the back ends. A message is broadcast as its length, then its
 //! bincode bytes; each back end's reply goes to rank 0 point to point, and
 //! rank 0 waits for all of them before the next frame (swap lock).

@@ -1,4 +1,4 @@
-//! Parallax front end: the coordinator (DESIGN.md "Process model"). It reads
+//! Parallax front end: the coordinator (docs/design.md "Process model"). It reads
 //! the scene, sends the large state once, then every frame broadcasts a small
 //! `FrameState`, waits for every back end's `FrameStats` (frames are
 //! swap-locked) and writes them to `stats.jsonl`.
@@ -141,11 +141,13 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         (n, _) => n,
     };
     let mut summary = RunSummary::default();
-    let mut tf_version = 1u64;
-    let mut tf_switch: Option<usize> = None;
     let mut notes = Notes::default();
-    let mut tools = scene.tools.clone();
-    let mut tools_version = 1u64;
+    let mut sent = Sent {
+        tools: scene.tools.clone(),
+        tools_version: 1,
+        tf_version: 1,
+        tf_switch: None,
+    };
     for frame in 0..frames {
         let mut state = FrameState {
             frame,
@@ -153,48 +155,13 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             observer: display.observer.position,
             eta: scene.render.eta,
             render: scene.render.clone(),
-            tf_version,
-            tools_version,
+            tf_version: sent.tf_version,
+            tools_version: sent.tools_version,
             stream: Vec::new(),
             pick: None,
         };
         if let Some(sc) = &script {
-            let st = sc.at(
-                frame,
-                &scene.placement,
-                display.observer.position,
-                scene.render.eta,
-            );
-            state.placement = st.placement;
-            state.observer = st.observer;
-            state.eta = st.eta;
-            state.render.gamma = sc.gamma(frame, scene.render.gamma);
-            state.render.accuracy = sc.accuracy(frame, scene.render.accuracy);
-            state.render.step_factor = sc.step_factor(frame, scene.render.step_factor);
-            // Tools are sent when they change, not every frame.
-            let now = sc.tools(frame, &scene.tools)?;
-            if now != tools {
-                tools = now;
-                tools_version += 1;
-                transport.broadcast(&ToBackend::Tools {
-                    version: tools_version,
-                    tools: tools.clone(),
-                })?;
-                state.tools_version = tools_version;
-            }
-            // A transfer function is sent when it changes, not every frame.
-            if let Some((i, path)) = st.tf {
-                if tf_switch != Some(i) {
-                    tf_switch = Some(i);
-                    tf_version += 1;
-                    let tf = TransferFunction::load(&path)?;
-                    transport.broadcast(&ToBackend::TransferFunction {
-                        version: tf_version,
-                        tf,
-                    })?;
-                    state.tf_version = tf_version;
-                }
-            }
+            sent.script(sc, &scene, &display, &mut state, transport)?;
         }
         let start = std::time::Instant::now();
         let msg = ToBackend::Frame(state);
@@ -221,17 +188,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         let slowest = stats.iter().map(|s| s.total_ms).fold(0.0, f64::max);
         summary.coordination_ms.push((wall - slowest).max(0.0));
         if let Some(f) = frontend_file.as_mut() {
-            let line = serde_json::json!({
-                "frame": frame,
-                "wall_ms": wall,
-                "slowest_backend_ms": slowest,
-                "coordination_ms": summary.coordination_ms.last().unwrap(),
-                "state_bytes": summary.state_bytes.last().unwrap(),
-                "backends": stats.len(),
-            });
-            serde_json::to_writer(&mut *f, &line)?;
-            f.write_all(b"\n")?;
-            f.flush()?;
+            write_frontend_line(f, frame, &summary, slowest, stats.len())?;
         }
         if opts.verbose {
             println!("{}", frame_line(frame, &stats, wall));
@@ -249,19 +206,111 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             .map_err(|e| anyhow::anyhow!("writing stats: {}", e.error()))?;
     }
     if opts.verbose && !summary.wall_ms.is_empty() {
-        let n = summary.wall_ms.len() as f64;
-        let wall = summary.wall_ms.iter().sum::<f64>() / n;
-        let coord = summary.coordination_ms.iter().sum::<f64>() / n;
-        println!(
+        println!("{}", summary.line());
+    }
+    Ok(summary)
+}
+
+/// What the coordinator has sent the back ends: the tools and the
+/// transfer function, each with its version, and which of the script's
+/// transfer functions is current.
+struct Sent {
+    tools: Vec<parallax_common::tools::Tool>,
+    tools_version: u64,
+    tf_version: u64,
+    tf_switch: Option<usize>,
+}
+
+impl Sent {
+    /// The script's frame: placement, observer, η and knobs in `state`;
+    /// tools and a transfer function are broadcast when they change, not
+    /// every frame.
+    fn script(
+        &mut self,
+        sc: &Script,
+        scene: &Scene,
+        display: &Display,
+        state: &mut FrameState,
+        transport: &mut dyn Transport,
+    ) -> Result<()> {
+        let frame = state.frame;
+        let st = sc.at(
+            frame,
+            &scene.placement,
+            display.observer.position,
+            scene.render.eta,
+        );
+        state.placement = st.placement;
+        state.observer = st.observer;
+        state.eta = st.eta;
+        state.render.gamma = sc.gamma(frame, scene.render.gamma);
+        state.render.accuracy = sc.accuracy(frame, scene.render.accuracy);
+        state.render.step_factor = sc.step_factor(frame, scene.render.step_factor);
+        // Tools are sent when they change, not every frame.
+        let now = sc.tools(frame, &scene.tools)?;
+        if now != self.tools {
+            self.tools = now;
+            self.tools_version += 1;
+            transport.broadcast(&ToBackend::Tools {
+                version: self.tools_version,
+                tools: self.tools.clone(),
+            })?;
+            state.tools_version = self.tools_version;
+        }
+        // A transfer function is sent when it changes, not every frame.
+        if let Some((i, path)) = st.tf {
+            if self.tf_switch != Some(i) {
+                self.tf_switch = Some(i);
+                self.tf_version += 1;
+                let tf = TransferFunction::load(&path)?;
+                transport.broadcast(&ToBackend::TransferFunction {
+                    version: self.tf_version,
+                    tf,
+                })?;
+                state.tf_version = self.tf_version;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The coordinator's own figures of a frame, one line of frontend.jsonl.
+fn write_frontend_line(
+    f: &mut impl Write,
+    frame: u64,
+    summary: &RunSummary,
+    slowest: f64,
+    backends: usize,
+) -> Result<()> {
+    let line = serde_json::json!({
+        "frame": frame,
+        "wall_ms": summary.wall_ms.last().unwrap(),
+        "slowest_backend_ms": slowest,
+        "coordination_ms": summary.coordination_ms.last().unwrap(),
+        "state_bytes": summary.state_bytes.last().unwrap(),
+        "backends": backends,
+    });
+    serde_json::to_writer(&mut *f, &line)?;
+    f.write_all(b"\n")?;
+    f.flush()?;
+    Ok(())
+}
+
+impl RunSummary {
+    /// The run's averages in one line.
+    fn line(&self) -> String {
+        let n = self.wall_ms.len() as f64;
+        let wall = self.wall_ms.iter().sum::<f64>() / n;
+        let coord = self.coordination_ms.iter().sum::<f64>() / n;
+        format!(
             "{} frames: {:.1} ms per frame on average, coordination {:.2} ms ({:.1}%), FrameState {} bytes",
-            summary.wall_ms.len(),
+            self.wall_ms.len(),
             wall,
             coord,
             100.0 * coord / wall.max(1e-9),
-            summary.state_bytes.iter().max().unwrap()
-        );
+            self.state_bytes.iter().max().unwrap()
+        )
     }
-    Ok(summary)
 }
 
 /// What the user is told once per run, not once per frame: limits that held

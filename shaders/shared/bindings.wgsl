@@ -65,7 +65,7 @@ struct ToolParams {
 // the offset uniform, and it did so for every use of these fields inside
 // the sample loop; a copy is read once per ray and then lives in registers
 // or on the stack. On the Colin27 brain it took 14–21 % off the frame
-// (docs/figures.md, "Constants read once a ray"). On a GPU the copy is one
+// (docs/performance.md, "Kernel changes on a CPU device"). On a GPU the copy is one
 // read per ray of the fields the kernel uses.
 @group(0) @binding(0) var<uniform> frame_uniform: GpuFrame;
 var<private> frame: GpuFrame;
@@ -121,7 +121,7 @@ struct TfPieces {
 
 // Read from a private copy, as the frame's constants are (see below): read
 // from the uniform itself, even at constant indices, the brain's frame of
-// docs/figures.md took 81 ms against 41.
+// docs/performance.md ("Kernel changes on a CPU device") took 81 ms against 41.
 @group(0) @binding(14) var<uniform> tf_pieces_uniform: TfPieces;
 var<private> tf_pieces: TfPieces;
 

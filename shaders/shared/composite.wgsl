@@ -1,4 +1,4 @@
-// shared/composite.wgsl: what one pre-integrated segment adds (DESIGN.md
+// shared/composite.wgsl: what one pre-integrated segment adds (docs/design.md
 // "What a pixel means"), after the enhancers have had their say.
 
 #import sample
@@ -43,4 +43,17 @@ fn over(acc: ptr<function, Acc>, ca: vec4<f32>) {
     let t = 1.0 - (*acc).alpha;
     (*acc).color = (*acc).color + t * ca.xyz;
     (*acc).alpha = (*acc).alpha + t * ca.w;
+}
+
+// Two-sided Phong with a headlight: the shade of a surface with gradient `g`
+// seen along `d`, material (ka, kd, ks, shininess); 1 where the gradient
+// vanishes.
+fn phong(g: vec3<f32>, d: vec3<f32>, m: vec4<f32>) -> f32 {
+    var shade = 1.0;
+    let gl = length(g);
+    if (gl > 1e-6) {
+        let diff = abs(dot(g / gl, d));
+        shade = m.x + m.y * diff + m.z * pow(diff, m.w);
+    }
+    return shade;
 }

@@ -29,3 +29,21 @@ fn snell(d: vec3<f32>, g: vec3<f32>, nu1: f32, nu2: f32) -> vec3<f32> {
     }
     return out / l;
 }
+
+// Snell's law where the refraction index changes from `nu_prev` to `nu`
+// (ν_prev ≥ 0: there was a previous segment), about the gradient at the end
+// of the segment (ray parameter `tc`): the ray then goes on from there in
+// its new direction (`o`, `d` moved). True where it bent.
+fn bend_at(leaf: Leaf, o: ptr<function, vec3<f32>>, d: ptr<function, vec3<f32>>, tc: f32,
+           nu_prev: f32, nu: f32) -> bool {
+    if (nu_prev >= 0.0 && abs(nu - nu_prev) > 1e-6) {
+        let p = *o + *d * tc;
+        let nd = snell(*d, gradient(leaf, p), nu_prev, nu);
+        if (any(nd != *d)) {
+            *o = p;
+            *d = nd;
+            return true;
+        }
+    }
+    return false;
+}

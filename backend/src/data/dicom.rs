@@ -313,6 +313,62 @@ impl DicomSource {
 pub fn open_dicom(dir: &Path, series: Option<&str>) -> Result<DicomSource> {
     let label = dir.display().to_string();
     let all = scan(dir)?;
+    let (uid, mut slices) = choose_series(&label, &all, series)?;
+    let first = slices[0].clone();
+    check_slices(&label, &slices)?;
+    let f0 = file_name(&first.path);
+    let row: [f64; 3] = first.orientation[0..3].try_into().unwrap();
+    let col: [f64; 3] = first.orientation[3..6].try_into().unwrap();
+    let normal = cross(row, col);
+    let nn = dot(normal, normal).sqrt();
+    ensure!(
+        nn > 0.5 && (dot(row, row).sqrt() - 1.0).abs() < 1e-3 && (dot(col, col).sqrt() - 1.0).abs() < 1e-3,
+        "{label}: {f0}: ImageOrientationPatient (0020,0037) {:?} is not two orthogonal unit vectors",
+        first.orientation
+    );
+    let normal = normal.map(|c| c / nn);
+    slices.sort_by(|a, b| dot(a.position, normal).total_cmp(&dot(b.position, normal)));
+    let z: Vec<f64> = slices.iter().map(|s| dot(s.position, normal)).collect();
+    let spacing_z = slice_spacing(&label, &slices, &z, normal)?;
+    // DICOM PixelSpacing is (row spacing, column spacing): between rows (y)
+    // first, then between columns (x).
+    let info = VolumeInfo {
+        dims: [first.columns, first.rows, slices.len()],
+        spacing: [first.pixel_spacing[1], first.pixel_spacing[0], spacing_z],
+        voxel_type: voxel_type(&slices),
+    };
+    check_info(&label, &info, "Rows/Columns", "PixelSpacing")?;
+    let p0 = slices[0].position;
+    let description = format!(
+        "DICOM series {uid} \"{}\" ({} slices); patient (LPS) directions: x {:?}, y {:?}, z {:?}; first voxel at {:?} mm",
+        first.description,
+        slices.len(),
+        row.map(round6),
+        col.map(round6),
+        normal.map(round6),
+        p0.map(round6)
+    );
+    let src = DicomSource {
+        label,
+        info,
+        slices,
+        next: 0,
+        description,
+    };
+    // Decode the first slice now: an unsupported transfer syntax is reported
+    // before anything is written.
+    let mut probe = vec![0f32; src.info.dims[0] * src.info.dims[1]];
+    src.decode_slice(0, &mut probe)?;
+    Ok(src)
+}
+
+/// The series of `all` that `series` names (by UID or by its number in the
+/// listing, from 1), or the only one.
+fn choose_series(
+    label: &str,
+    all: &BTreeMap<String, Vec<SliceMeta>>,
+    series: Option<&str>,
+) -> Result<(String, Vec<SliceMeta>)> {
     let listing = || {
         all.iter()
             .enumerate()
@@ -347,8 +403,13 @@ pub fn open_dicom(dir: &Path, series: Option<&str>) -> Result<DicomSource> {
                 })?
         }
     };
-    let (uid, mut slices) = (uid.clone(), slices.clone());
-    let first = slices[0].clone();
+    Ok((uid.clone(), slices.clone()))
+}
+
+/// Every slice of a series is a single-frame greyscale image of the first
+/// one's size, pixel spacing and orientation, from an untilted gantry.
+fn check_slices(label: &str, slices: &[SliceMeta]) -> Result<()> {
+    let first = &slices[0];
     let f0 = file_name(&first.path);
     ensure!(
         first.frames == 1,
@@ -361,7 +422,7 @@ pub fn open_dicom(dir: &Path, series: Option<&str>) -> Result<DicomSource> {
         "{label}: {f0}: SamplesPerPixel (0028,0002) is {}: only greyscale volumes import",
         first.samples_per_pixel
     );
-    for s in &slices {
+    for s in slices {
         let f = file_name(&s.path);
         ensure!(
             s.rows == first.rows && s.columns == first.columns,
@@ -398,92 +459,57 @@ pub fn open_dicom(dir: &Path, series: Option<&str>) -> Result<DicomSource> {
             s.tilt
         );
     }
-    let row: [f64; 3] = first.orientation[0..3].try_into().unwrap();
-    let col: [f64; 3] = first.orientation[3..6].try_into().unwrap();
-    let normal = cross(row, col);
-    let nn = dot(normal, normal).sqrt();
-    ensure!(
-        nn > 0.5 && (dot(row, row).sqrt() - 1.0).abs() < 1e-3 && (dot(col, col).sqrt() - 1.0).abs() < 1e-3,
-        "{label}: {f0}: ImageOrientationPatient (0020,0037) {:?} is not two orthogonal unit vectors",
-        first.orientation
-    );
-    let normal = normal.map(|c| c / nn);
-    slices.sort_by(|a, b| dot(a.position, normal).total_cmp(&dot(b.position, normal)));
-    let z: Vec<f64> = slices.iter().map(|s| dot(s.position, normal)).collect();
-    let spacing_z = if slices.len() == 1 {
-        first.pixel_spacing[0].min(first.pixel_spacing[1])
-    } else {
-        let gaps: Vec<f64> = z.windows(2).map(|w| w[1] - w[0]).collect();
-        let mut sorted = gaps.clone();
-        sorted.sort_by(f64::total_cmp);
-        let typical = sorted[sorted.len() / 2];
-        for (i, &g) in gaps.iter().enumerate() {
-            let (a, b) = (file_name(&slices[i].path), file_name(&slices[i + 1].path));
-            ensure!(
-                g > 1e-6,
-                "{label}: {a} and {b} have the same ImagePositionPatient (0020,0032) along the slice normal (duplicate slice?)"
-            );
-            if (g - typical).abs() > SPACING_TOLERANCE * typical {
-                let ratio = g / typical;
-                if (ratio - ratio.round()).abs() < 0.05 && ratio.round() >= 2.0 {
-                    bail!(
-                        "{label}: missing slice: between {a} and {b} the ImagePositionPatient (0020,0032) \
-                         gap is {g:.4} mm, {:.0}× the series' spacing of {typical:.4} mm",
-                        ratio.round()
-                    );
-                }
+    Ok(())
+}
+
+/// The spacing along the slice normal of slices sorted by their position
+/// `z` along it: even gaps (a missing, duplicate or uneven slice is named),
+/// stacked along the normal; one slice takes its finer pixel spacing.
+fn slice_spacing(label: &str, slices: &[SliceMeta], z: &[f64], normal: [f64; 3]) -> Result<f64> {
+    if slices.len() == 1 {
+        let first = &slices[0];
+        return Ok(first.pixel_spacing[0].min(first.pixel_spacing[1]));
+    }
+    let gaps: Vec<f64> = z.windows(2).map(|w| w[1] - w[0]).collect();
+    let mut sorted = gaps.clone();
+    sorted.sort_by(f64::total_cmp);
+    let typical = sorted[sorted.len() / 2];
+    for (i, &g) in gaps.iter().enumerate() {
+        let (a, b) = (file_name(&slices[i].path), file_name(&slices[i + 1].path));
+        ensure!(
+            g > 1e-6,
+            "{label}: {a} and {b} have the same ImagePositionPatient (0020,0032) along the slice normal (duplicate slice?)"
+        );
+        if (g - typical).abs() > SPACING_TOLERANCE * typical {
+            let ratio = g / typical;
+            if (ratio - ratio.round()).abs() < 0.05 && ratio.round() >= 2.0 {
                 bail!(
-                    "{label}: uneven slice spacing: ImagePositionPatient (0020,0032) of {a} and {b} are \
-                     {g:.4} mm apart, the series' spacing is {typical:.4} mm"
+                    "{label}: missing slice: between {a} and {b} the ImagePositionPatient (0020,0032) \
+                     gap is {g:.4} mm, {:.0}× the series' spacing of {typical:.4} mm",
+                    ratio.round()
                 );
             }
-        }
-        // Slices must stack along the normal: an in-plane drift between
-        // neighbours is a sheared (tilted) acquisition.
-        for w in slices.windows(2) {
-            let d = [0, 1, 2].map(|i| w[1].position[i] - w[0].position[i]);
-            let along = dot(d, normal);
-            let off = (dot(d, d) - along * along).max(0.0).sqrt();
-            ensure!(
-                off <= 0.01 * along.abs() + 1e-4,
-                "{label}: {} and {}: ImagePositionPatient (0020,0032) moves {off:.4} mm within the slice plane \
-                 between slices (a gantry tilt or sheared series), which is not supported",
-                file_name(&w[0].path),
-                file_name(&w[1].path)
+            bail!(
+                "{label}: uneven slice spacing: ImagePositionPatient (0020,0032) of {a} and {b} are \
+                 {g:.4} mm apart, the series' spacing is {typical:.4} mm"
             );
         }
-        (z[z.len() - 1] - z[0]) / (z.len() - 1) as f64
-    };
-    // DICOM PixelSpacing is (row spacing, column spacing): between rows (y)
-    // first, then between columns (x).
-    let info = VolumeInfo {
-        dims: [first.columns, first.rows, slices.len()],
-        spacing: [first.pixel_spacing[1], first.pixel_spacing[0], spacing_z],
-        voxel_type: voxel_type(&slices),
-    };
-    check_info(&label, &info, "Rows/Columns", "PixelSpacing")?;
-    let p0 = slices[0].position;
-    let description = format!(
-        "DICOM series {uid} \"{}\" ({} slices); patient (LPS) directions: x {:?}, y {:?}, z {:?}; first voxel at {:?} mm",
-        first.description,
-        slices.len(),
-        row.map(round6),
-        col.map(round6),
-        normal.map(round6),
-        p0.map(round6)
-    );
-    let src = DicomSource {
-        label,
-        info,
-        slices,
-        next: 0,
-        description,
-    };
-    // Decode the first slice now: an unsupported transfer syntax is reported
-    // before anything is written.
-    let mut probe = vec![0f32; src.info.dims[0] * src.info.dims[1]];
-    src.decode_slice(0, &mut probe)?;
-    Ok(src)
+    }
+    // Slices must stack along the normal: an in-plane drift between
+    // neighbours is a sheared (tilted) acquisition.
+    for w in slices.windows(2) {
+        let d = [0, 1, 2].map(|i| w[1].position[i] - w[0].position[i]);
+        let along = dot(d, normal);
+        let off = (dot(d, d) - along * along).max(0.0).sqrt();
+        ensure!(
+            off <= 0.01 * along.abs() + 1e-4,
+            "{label}: {} and {}: ImagePositionPatient (0020,0032) moves {off:.4} mm within the slice plane \
+             between slices (a gantry tilt or sheared series), which is not supported",
+            file_name(&w[0].path),
+            file_name(&w[1].path)
+        );
+    }
+    Ok((z[z.len() - 1] - z[0]) / (z.len() - 1) as f64)
 }
 
 fn round6(v: f64) -> f64 {

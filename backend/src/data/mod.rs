@@ -1,10 +1,12 @@
-//! Volume input: raw, NRRD, NIfTI readers and procedural volumes.
+//! Volume input: raw, NRRD, NIfTI, DICOM and TIFF readers, procedural
+//! volumes, and transfer-function presets from ParaView and 3D Slicer
+//! ([`presets`]).
 //!
 //! Every reader is a [`VolumeSource`]: it reads z-slices on demand, in
 //! increasing z, through a buffered (and, for gzip, decompressing) stream, so a
-//! volume larger than RAM can be imported (DESIGN.md "Data": "It must
+//! volume larger than RAM can be imported (docs/design.md "Data": "It must
 //! stream"). Values are handed on as `f32` data values in the volume-space
-//! layout of DESIGN.md ("Volume space"): x fastest, then y, then z.
+//! layout of docs/design.md ("Volume space"): x fastest, then y, then z.
 //!
 //! Errors name the file and the field or voxel at fault, because the person
 //! reading them is usually looking at a header in a text editor.
@@ -12,6 +14,7 @@
 pub mod dicom;
 pub mod nifti;
 pub mod nrrd;
+pub mod presets;
 pub mod raw;
 pub mod synth;
 pub mod tiff;
@@ -26,7 +29,7 @@ pub use self::raw::RawSource;
 pub use self::synth::{synth_value, write_synth, SynthKind};
 
 /// How to read a headerless raw volume (`parallax import x.raw --dims …
-/// --type … --spacing …`, DESIGN.md "Command line"): the header a raw file
+/// --type … --spacing …`, docs/design.md "Command line"): the header a raw file
 /// does not have.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RawParams {
@@ -154,7 +157,7 @@ pub(crate) fn shape_text(dims: [usize; 3], voxel_type: VoxelType) -> String {
 
 /// Checks what every reader must guarantee before handing out a
 /// [`VolumeInfo`]: no zero dimension, and a finite positive spacing (the
-/// volume-space box [0, N·s] of DESIGN.md must be a real box). `dims_field`
+/// volume-space box [0, N·s] of docs/design.md must be a real box). `dims_field`
 /// and `spacing_field` name where the values came from in the file.
 pub(crate) fn check_info(
     label: &str,
@@ -339,7 +342,7 @@ pub(crate) fn encode_samples(
 
 /// Rejects NaN and infinities: a non-finite data value would poison every
 /// brick range, average and pre-integrated table downstream, so float input
-/// is checked as it is read (DESIGN.md "Data", `VolumeSource` contract).
+/// is checked as it is read (docs/design.md "Data", `VolumeSource` contract).
 /// `first` is the linear index (x fastest) of `values[0]` in the volume.
 pub(crate) fn check_finite(
     label: &str,

@@ -1,10 +1,10 @@
 //! NIfTI-1 input (`.nii`, `.nii.gz`): the format of most MRI and many CT
-//! volumes users have (DESIGN.md "Data").
+//! volumes users have (docs/design.md "Data").
 //!
 //! The 348-byte header is parsed by the `nifti` crate (which also detects the
 //! byte order); the voxels are streamed by [`RawSource`] from `vox_offset`,
 //! so nothing holds the whole volume. Only the header's size and sample
-//! fields are used: the volume is placed by the scene (DESIGN.md "Volume
+//! fields are used: the volume is placed by the scene (docs/design.md "Volume
 //! space"), not by the qform/sform.
 
 use std::fs::File;
@@ -81,7 +81,7 @@ fn scaled_type(stored: VoxelType, slope: f64, inter: f64) -> VoxelType {
 /// * Datatypes: uint8 (2), int16 (4), float32 (16), uint16 (512).
 /// * Spacing: |pixdim[1..4]|; a pixdim of 0 (written by some tools for
 ///   "unknown") is read as 1, without a warning: the scene's `size` places
-///   the volume anyway (DESIGN.md "Volume space"). A non-finite pixdim is an
+///   the volume anyway (docs/design.md "Volume space"). A non-finite pixdim is an
 ///   error.
 /// * Scaling: if `scl_slope` ≠ 0 and (slope, inter) ≠ (1, 0), values are
 ///   `slope · stored + inter`; see [`scaled_type`] for the reported type.

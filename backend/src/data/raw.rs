@@ -3,7 +3,7 @@
 //!
 //! A [`RawSource`] decodes packed samples (u8, u16, i16, f32; either byte
 //! order) one z-slice at a time from any byte stream, so the readers of every
-//! format share one streaming, checking decoder (DESIGN.md "Data": "It must
+//! format share one streaming, checking decoder (docs/design.md "Data": "It must
 //! stream").
 
 use std::fs::File;

@@ -1,5 +1,5 @@
 //! Procedural volumes (`parallax synth <kind> --size N [--type u8|u16|f32] -o
-//! vol.nrrd`, DESIGN.md "Command line").
+//! vol.nrrd`, docs/design.md "Command line").
 //!
 //! Each kind is a known signal that exercises one part of the pipeline: the
 //! Marschner–Lobb signal measures reconstruction (filtering) error, Shepp–Logan
@@ -10,7 +10,7 @@
 //!
 //! Voxel (i, j, k) of an N³ volume is sampled at its centre, mapped to the
 //! cube [−1, 1]³: x = −1 + (2i + 1)/N (likewise y from j, z from k), the
-//! volume-space convention of DESIGN.md with the box scaled to [−1, 1].
+//! volume-space convention of docs/design.md with the box scaled to [−1, 1].
 
 use std::f64::consts::PI;
 use std::path::Path;

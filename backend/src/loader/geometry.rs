@@ -2,70 +2,14 @@
 //! projected voxel size per view (G08 §4, L12 §4.2 "the projected size of a
 //! voxel"), and the view-frustum test (G08 §4, L12 §4.2).
 
-use crate::store::{NodeKey, OctreeLayout};
+use crate::geometry::SceneGeometry;
+use crate::store::NodeKey;
 use glam::DVec3;
-use parallax_common::camera::{Placement, View};
+use parallax_common::camera::View;
 
 /// Observer closer than this (metres) to a node's box counts as inside it:
 /// the node's voxels project to an unbounded number of pixels.
 const TOUCHING_M: f64 = 1e-9;
-
-/// The static geometry of a database: layout, voxel spacing, extent.
-#[derive(Clone, Debug)]
-pub(crate) struct Geometry {
-    pub layout: OctreeLayout,
-    pub spacing: [f64; 3],
-    pub extent: [f64; 3],
-}
-
-impl Geometry {
-    pub fn new(layout: OctreeLayout, spacing: [f64; 3]) -> Self {
-        let extent = std::array::from_fn(|a| layout.dims[a] as f64 * spacing[a]);
-        Geometry {
-            layout,
-            spacing,
-            extent,
-        }
-    }
-
-    /// The node's region of the volume, [lo, hi] in volume space (data
-    /// units): brick · scale · spacing · [x, x+1] along each axis (scale:
-    /// source voxels per level voxel), clamped to the extent.
-    pub fn node_box(&self, key: NodeKey) -> (DVec3, DVec3) {
-        let scale = self.layout.voxel_scale(key.level as u32);
-        let c = [key.x, key.y, key.z];
-        let span = |a: usize| (self.layout.brick * scale[a]) as f64 * self.spacing[a];
-        let lo: [f64; 3] = std::array::from_fn(|a| (c[a] as f64 * span(a)).min(self.extent[a]));
-        let hi: [f64; 3] =
-            std::array::from_fn(|a| ((c[a] as f64 + 1.0) * span(a)).min(self.extent[a]));
-        (DVec3::from(lo), DVec3::from(hi))
-    }
-
-    /// The size of a level-`level` voxel that refinement compares with a
-    /// pixel, in data units: its real extent, the longest edge
-    /// max(scale · spacing), above the leaves; a leaf's finest edge,
-    /// min(spacing), at the leaves (they cannot be refined; the figure only
-    /// reports how closely they are seen).
-    ///
-    /// On thick slices (a CT of 0.5 × 0.5 × 4 mm) sizing a coarse voxel by
-    /// its finest edge would let it pass for a pixel-sized voxel and blur
-    /// the slices (RMSE 4e-2 against 2e-4 at full detail, `parallax bench
-    /// --anisotropy`); sized by its longest it is refined wherever that edge
-    /// would be seen. The levels of `OctreeLayout::for_spacing` halve the
-    /// finer axes first, so above the source they have 1 × 1 × 4 mm voxels
-    /// (4 mm) where levels halving every axis have 1 × 1 × 8 mm (8 mm): a
-    /// view in which 4 mm is under a pixel is served a level coarser.
-    pub fn voxel_len(&self, level: u32) -> f64 {
-        let fold = |f: fn(f64, f64) -> f64, init| self.spacing.iter().cloned().fold(init, f);
-        if level >= self.layout.leaf_level() {
-            return fold(f64::min, f64::INFINITY);
-        }
-        let scale = self.layout.voxel_scale(level);
-        (0..3)
-            .map(|a| scale[a] as f64 * self.spacing[a])
-            .fold(0.0, f64::max)
-    }
-}
 
 /// A light field display's spatial resolution (G10 §4): s(z) = s0 +
 /// 2|z|·tan(Φ/2) at distance |z| from the screen plane.
@@ -119,21 +63,21 @@ pub(crate) struct Assessment {
 
 /// The views of one frame in the placement of one frame.
 pub(crate) struct FrameGeometry {
-    geom: Geometry,
-    placement: Placement,
+    scene: SceneGeometry,
     scale: f64,
     views: Vec<ViewGeom>,
     lightfield: Option<LightField>,
 }
 
 impl FrameGeometry {
-    pub fn new(geom: &Geometry, views: &[View], placement: &Placement) -> Self {
-        let scale = placement.scale(geom.extent);
+    pub fn new(scene: &SceneGeometry, views: &[View]) -> Self {
+        let scale = scene.scale();
+        let (placement, extent) = (&scene.placement, scene.extent());
         let views: Vec<ViewGeom> = views
             .iter()
             .map(|v| {
                 let observer = DVec3::from(v.observer);
-                let (observer_vol, _) = placement.ray_to_volume(geom.extent, observer, DVec3::X);
+                let (observer_vol, _) = placement.ray_to_volume(extent, observer, DVec3::X);
                 ViewGeom {
                     observer,
                     observer_vol,
@@ -145,8 +89,7 @@ impl FrameGeometry {
             })
             .collect();
         FrameGeometry {
-            geom: geom.clone(),
-            placement: *placement,
+            scene: *scene,
             scale,
             views,
             lightfield: None,
@@ -179,8 +122,8 @@ impl FrameGeometry {
     ///   under-refines (L12 Fig. 4); a sphere that reaches the observer's
     ///   plane (α + β ≥ 90°) gives +∞.
     pub fn assess(&self, key: NodeKey) -> Assessment {
-        let (lo, hi) = self.geom.node_box(key);
-        let voxel_m = self.geom.voxel_len(key.level as u32) * self.scale;
+        let (lo, hi) = self.scene.geom.node_box(key);
+        let voxel_m = self.scene.geom.voxel_len(key.level as u32) * self.scale;
         let lf = self
             .lightfield
             .filter(|_| self.views.iter().any(|v| v.parallax));
@@ -200,7 +143,7 @@ impl FrameGeometry {
             };
             voxel_m / lf.resolution_at(z)
         });
-        let centre = self.placement.to_display(self.geom.extent, (lo + hi) * 0.5);
+        let centre = self.scene.to_display((lo + hi) * 0.5);
         let radius = (hi - lo).length() * 0.5 * self.scale;
         let mut best_seen = f64::NEG_INFINITY;
         let mut best_any = f64::NEG_INFINITY;
@@ -219,7 +162,7 @@ impl FrameGeometry {
             } else {
                 // The point-wise size (what multilevel sampling blends by)
                 // at the corners and the closest point.
-                let closest_d = self.placement.to_display(self.geom.extent, closest);
+                let closest_d = self.scene.to_display(closest);
                 let pointwise = corners
                     .iter()
                     .chain(std::iter::once(&closest_d))
@@ -264,7 +207,7 @@ impl FrameGeometry {
                 if c & 2 == 0 { lo.y } else { hi.y },
                 if c & 4 == 0 { lo.z } else { hi.z },
             );
-            self.placement.to_display(self.geom.extent, p)
+            self.scene.to_display(p)
         })
     }
 }
@@ -379,6 +322,20 @@ fn box_in_union(pyramids: &[(DVec3, [DVec3; 4])], corners: &[DVec3; 8]) -> bool 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Geometry;
+    use crate::store::OctreeLayout;
+    use parallax_common::camera::Placement;
+
+    /// The frame geometry of `views` with the volume `g` placed at `pl`.
+    fn frame(g: &Geometry, views: &[View], pl: &Placement) -> FrameGeometry {
+        FrameGeometry::new(
+            &SceneGeometry {
+                geom: *g,
+                placement: *pl,
+            },
+            views,
+        )
+    }
 
     fn geom() -> Geometry {
         // 64³ voxels of 0.5 × 0.5 × 1.0, bricks of 8: L = 3.
@@ -416,7 +373,7 @@ mod tests {
             pixel_size: 0.0015,
             angular_accuracy_deg: 0.8,
         };
-        let f = FrameGeometry::new(&g, &[v], &pl).with_lightfield(Some(lf));
+        let f = frame(&g, &[v], &pl).with_lightfield(Some(lf));
         // the box spans z = 0.35 ± 0.15: closest to the screen at z = 0.2
         let key = NodeKey::new(3, 0, 0, 0);
         let voxel_m = 0.5 * 0.3 / 64.0;
@@ -425,14 +382,14 @@ mod tests {
         let got = f.assess(key).pixels;
         assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
         // without the light field, the same view uses its pixel grid
-        let plain = FrameGeometry::new(&g, &[v], &pl).assess(key).pixels;
+        let plain = frame(&g, &[v], &pl).assess(key).pixels;
         assert!((plain - want).abs() > 0.1 * want);
         // a node straddling the screen plane gets s0
         let pl0 = Placement {
             center: [0.0, 0.0, 0.0],
             ..pl
         };
-        let f0 = FrameGeometry::new(&g, &[v], &pl0).with_lightfield(Some(lf));
+        let f0 = frame(&g, &[v], &pl0).with_lightfield(Some(lf));
         // the root's voxels: 8 source voxels, its longest edge 8 · 1.0
         let root_voxel = 8.0 * 0.3 / 64.0;
         assert!((f0.assess(NodeKey::root()).pixels - root_voxel / 0.0015).abs() < 1e-9);
@@ -448,7 +405,7 @@ mod tests {
             size: 0.3,
         };
         let v = View::window([64, 64], [0.4, 0.4], [0.0, 0.0, 2.0]);
-        let f = FrameGeometry::new(&g, &[v], &pl);
+        let f = frame(&g, &[v], &pl);
         let a = f.assess(NodeKey::root());
         // voxel size at level 0: its longest edge, 8 · 1.0 = 8 data units
         // = 8 · 0.3/64 m (a leaf's: its finest, 0.5); closest point: the
@@ -474,11 +431,11 @@ mod tests {
         assert!(a.seen);
         // an observer inside the box: infinite
         let inside = View::window([64, 64], [0.4, 0.4], [0.0, 0.0, 0.1]);
-        let f = FrameGeometry::new(&g, &[inside], &pl);
+        let f = frame(&g, &[inside], &pl);
         assert_eq!(f.assess(NodeKey::root()).pixels, f64::INFINITY);
         // the finest of two views wins
         let far = View::window([64, 64], [0.4, 0.4], [0.0, 0.0, 20.0]);
-        let f = FrameGeometry::new(&g, &[far, v], &pl);
+        let f = frame(&g, &[far, v], &pl);
         assert!((f.assess(NodeKey::root()).pixels - want).abs() < 1e-9 * want);
     }
 
@@ -498,10 +455,9 @@ mod tests {
         // Same distance from the observer (0.9 m to the centre): on the
         // axis, and 60° off it.
         let key = NodeKey::new(2, 1, 1, 1);
-        let on = FrameGeometry::new(&g, &[v], &at(0.0, -0.4)).assess(key);
+        let on = frame(&g, &[v], &at(0.0, -0.4)).assess(key);
         let off60 = 60f64.to_radians();
-        let off = FrameGeometry::new(&g, &[v], &at(0.9 * off60.sin(), 0.5 - 0.9 * off60.cos()))
-            .assess(key);
+        let off = frame(&g, &[v], &at(0.9 * off60.sin(), 0.5 - 0.9 * off60.cos())).assess(key);
         assert!(on.seen && off.seen);
         // By distance the two are alike (within the box's extent).
         assert!(
@@ -531,7 +487,7 @@ mod tests {
                 rotation_deg: rot,
                 size: 0.3,
             };
-            let f = FrameGeometry::new(&g, &[v], &pl);
+            let f = frame(&g, &[v], &pl);
             // brute force: nearest of a dense sample of the display-space box
             let (lo, hi) = g.node_box(key);
             let mut best = f64::INFINITY;
@@ -568,14 +524,14 @@ mod tests {
         let ahead = View::window([64, 64], [0.4, 0.4], [0.0, 0.0, 1.0]);
         let mut aside = ahead;
         aside.region = [5.0, 5.0, 0.4, 0.4];
-        let f = FrameGeometry::new(&g, &[aside], &pl);
+        let f = frame(&g, &[aside], &pl);
         assert!(!f.assess(NodeKey::root()).seen);
-        let f = FrameGeometry::new(&g, &[ahead], &pl);
+        let f = frame(&g, &[ahead], &pl);
         assert!(f.assess(NodeKey::root()).seen);
         // a narrow region right of centre: the left half of the volume is out
         let mut right = ahead;
         right.region = [0.03, -0.2, 0.1, 0.4];
-        let f = FrameGeometry::new(&g, &[right], &pl);
+        let f = frame(&g, &[right], &pl);
         assert!(!f.assess(NodeKey::new(1, 0, 0, 0)).seen);
         assert!(f.assess(NodeKey::new(1, 1, 0, 0)).seen);
         // behind the observer (the pyramid opens towards −z): out
@@ -585,7 +541,7 @@ mod tests {
             center: [0.0, 0.0, 2.0],
             ..pl
         };
-        let f = FrameGeometry::new(&g, &[behind], &pl_front);
+        let f = frame(&g, &[behind], &pl_front);
         assert!(!f.assess(NodeKey::root()).seen);
         // η > 0: culled by the rays of the multi-centre projector, which
         // reach the volume for the view ahead and not for the one aside.
@@ -593,12 +549,12 @@ mod tests {
             let mut lf_aside = aside;
             lf_aside.eta = 1.0;
             lf_aside.eye = eye;
-            let f = FrameGeometry::new(&g, &[lf_aside], &pl);
+            let f = frame(&g, &[lf_aside], &pl);
             assert!(!f.assess(NodeKey::root()).seen, "{eye:?}");
             let mut lf_ahead = ahead;
             lf_ahead.eta = 1.0;
             lf_ahead.eye = eye;
-            let f = FrameGeometry::new(&g, &[lf_ahead], &pl);
+            let f = frame(&g, &[lf_ahead], &pl);
             assert!(f.assess(NodeKey::root()).seen, "{eye:?}");
         }
     }

@@ -30,12 +30,13 @@ pub(crate) mod geometry;
 mod io;
 mod ranges;
 
+use crate::geometry::{Geometry, SceneGeometry};
 use crate::index::{CutNode, SpatialIndex, MAX_INDEX_NODES, NO_SLOT};
 use crate::store::{Brick, NodeKey, OctreeDb};
 use cache::{ByteLru, SlotPool};
 use feedback::Visibility;
+use geometry::FrameGeometry;
 pub use geometry::LightField;
-use geometry::{FrameGeometry, Geometry};
 use io::{IoPool, Landed};
 use parallax_common::camera::{Placement, View};
 use parallax_common::protocol::HeldBack;
@@ -322,8 +323,14 @@ impl Loader {
         } else {
             Visibility::none()
         };
-        let frame =
-            FrameGeometry::new(&self.geom, views, placement).with_lightfield(self.lightfield);
+        let frame = FrameGeometry::new(
+            &SceneGeometry {
+                geom: self.geom,
+                placement: *placement,
+            },
+            views,
+        )
+        .with_lightfield(self.lightfield);
         self.gpu.begin_frame();
         let mut b = Build::default();
         b.stats.adequate = true;

@@ -144,6 +144,18 @@ impl KernelKey {
         out
     }
 
+    /// Plain DVR: no MImDA, refraction or isosurface, and every enhancer a
+    /// pass-through. Such a kernel adds nothing where a ray meets no data.
+    pub fn is_plain(&self) -> bool {
+        !self.mimda
+            && !self.refraction
+            && !self.iso
+            && self
+                .enhancers
+                .iter()
+                .all(|&e| e == EnhancerKind::PassThrough)
+    }
+
     /// The `chain` module of this combination.
     pub fn chain_module(&self) -> Result<String> {
         if self.enhancers.len() > MAX_ENHANCERS {
@@ -269,11 +281,10 @@ fn expand<'a>(
 
 /// The composed source of a kernel combination.
 ///
-/// Two developer hooks for kernel experiments (`bench/kernel_variants.py`
-/// times hand-made variants of a kernel with them): with
-/// `PARALLAX_KERNEL_DUMP=<path>` the composed source is written there,
-/// and with `PARALLAX_KERNEL_SOURCE=<path>` every kernel the process makes
-/// is that file's source instead of its own composition.
+/// With `PARALLAX_KERNEL_DUMP=<path>` the composed source is also written
+/// there (for reading what a combination compiles to, and for
+/// `bench/kernel_profile.sh`). Variants of a kernel are made through its
+/// [`KernelKey`] and the override constants, never by patching the text.
 pub fn kernel(key: &KernelKey) -> Result<String> {
     let chain = key.chain_module()?;
     let src = compose("raycast.wgsl", KERNEL, &[("chain", &chain)])?;
@@ -284,14 +295,6 @@ pub fn kernel(key: &KernelKey) -> Result<String> {
                 Path::new(&path).display()
             )
         })?;
-    }
-    if let Some(path) = std::env::var_os("PARALLAX_KERNEL_SOURCE") {
-        return std::fs::read_to_string(&path).with_context(|| {
-            format!(
-                "PARALLAX_KERNEL_SOURCE: reading {}",
-                Path::new(&path).display()
-            )
-        });
     }
     Ok(src)
 }

@@ -39,6 +39,14 @@ pub(super) struct SubframeFilter {
     bind: Option<(wgpu::BindGroup, u64)>,
 }
 
+/// The shader's bindings in order, by their WGSL names (binding i is the
+/// i-th); a test checks them against naga's reflection.
+#[cfg(test)]
+const BINDINGS: [&str; 6] = ["params", "views", "image", "last", "change", "renders"];
+
+/// The shader, validated without a GPU by the test below.
+const SOURCE: &str = include_str!("../../../shaders/reconstruct.wgsl");
+
 fn entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
@@ -75,9 +83,7 @@ impl SubframeFilter {
         let module = gpu.validated("shaders/reconstruct.wgsl", || {
             dev.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("reconstruct.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(
-                    include_str!("../../../shaders/reconstruct.wgsl").into(),
-                ),
+                source: wgpu::ShaderSource::Wgsl(SOURCE.into()),
             })
         })?;
         let pipelines = (0..3)
@@ -204,5 +210,23 @@ impl SubframeFilter {
                 1,
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `shaders/reconstruct.wgsl` parses and validates with naga, without a
+    /// GPU, and declares the bindings the layout above makes, in order.
+    #[test]
+    fn the_filter_validates_and_its_bindings_match() {
+        let got = super::super::bindings::reflect("reconstruct.wgsl", SOURCE);
+        let want: Vec<(String, u32)> = BINDINGS
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (n.to_string(), i as u32))
+            .collect();
+        assert_eq!(got, want);
     }
 }

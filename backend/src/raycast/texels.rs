@@ -8,8 +8,7 @@
 //! branch. Views, index nodes, tiles and slot entries read as texels
 //! instead took the Colin27 skin at 8 mm from 46.6 to 33.3 ms a frame and
 //! the translucent brain at 5 mm from 105 to 84.5 ms, the image bit for
-//! bit the same (docs/figures.md, "What a frame costs before its
-//! samples").
+//! bit the same (docs/performance.md, "Kernel changes on a CPU device").
 
 use crate::gpu::Gpu;
 

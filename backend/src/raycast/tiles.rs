@@ -7,7 +7,7 @@
 //! changes no pixel, no feedback and no sample count. What it saves is the
 //! tile's whole run: on a GPU its workgroup, on a CPU device (lavapipe) one
 //! pass of the kernel's body for every SIMD row, since such a device runs
-//! every branch for all lanes whether any takes it or not (docs/figures.md).
+//! every branch for all lanes whether any takes it or not (docs/performance.md, "Kernel changes on a CPU device").
 //! On the Colin27 views of `bench/vtk_compare.sh` over half the tiles of
 //! the 512 × 512 image have no pixel with any opacity.
 //!
@@ -22,7 +22,6 @@
 //! reaches the observer's plane (or a degenerate view) covers the whole view.
 
 use crate::index::SpatialIndex;
-use crate::loader::geometry::Geometry;
 use glam::{DMat3, DVec3};
 use parallax_common::camera::{Placement, View};
 
@@ -94,7 +93,7 @@ fn tiles_in(
     subframe: bool,
     prune: bool,
 ) -> Vec<[u32; 2]> {
-    let geom = Geometry::new(scene.layout, scene.spacing);
+    let geom = &scene.geom;
     let ext = scene.extent();
     let map = VolumeMap::new(&scene.placement, ext);
     let mut cands: Vec<Candidate> = Vec::new();
@@ -123,9 +122,9 @@ fn tiles_in(
         // Cell (x, y, z) spans lo + [x, x + 1]·M voxels of this level
         // along x (clamped to the box), and likewise along y and z.
         let c = cells.per_axis as usize;
-        let scale = scene.layout.voxel_scale(k.level as u32);
+        let scale = geom.layout.voxel_scale(k.level as u32);
         let side: [f64; 3] =
-            std::array::from_fn(|a| (cells.voxels as usize * scale[a]) as f64 * scene.spacing[a]);
+            std::array::from_fn(|a| (cells.voxels as usize * scale[a]) as f64 * geom.spacing[a]);
         let at = |a: usize, i: usize, base: DVec3| (base[a] + i as f64 * side[a]).min(hi[a]);
         let first = rows.len();
         for z in 0..c {
@@ -468,15 +467,12 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (seed >> 33) % 10 < 6
         });
-        let scene = SceneGeometry {
-            placement: Placement {
-                center: [0.0, 0.0, 0.0],
-                rotation_deg: [20.0, 35.0, 0.0],
-                size: 0.1,
-            },
-            layout,
-            spacing: [1.0, 1.0, 1.0],
+        let placement = Placement {
+            center: [0.0, 0.0, 0.0],
+            rotation_deg: [20.0, 35.0, 0.0],
+            size: 0.1,
         };
+        let scene = SceneGeometry::new(placement, layout, [1.0, 1.0, 1.0]);
         let views = [
             View::window([96, 72], [0.3, 0.22], [0.02, -0.01, 0.6]),
             multi_centre_view([80, 60]),

@@ -254,7 +254,7 @@ impl Level {
     }
 
     /// Gathers a brick's (B+4)³ values, clamping indices to the grid (the
-    /// field is clamped to the edge voxels, DESIGN.md).
+    /// field is clamped to the edge voxels, docs/design.md).
     fn gather(&self, bx: usize, by: usize, r: usize, side: usize) -> Vec<f32> {
         let [nx, ny, _] = self.dims;
         let b = self.brick as i64;

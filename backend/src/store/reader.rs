@@ -507,7 +507,7 @@ mod tests {
         );
         blob[1..5].copy_from_slice(&u32::MAX.to_le_bytes());
         let crc = crc32fast::hash(&blob);
-        let e = codec::decode(
+        let e = codec::tests::decode(
             &blob,
             crc,
             0.0,

@@ -39,8 +39,8 @@ pub fn import_volume(vol: &Volume, path: &Path, brick: usize, encoding: BrickEnc
 /// RMSE and max abs of premultiplied RGBA against a reference image.
 pub fn error(img: &[[f32; 4]], reference: &[[f64; 4]]) -> (f64, f64) {
     assert_eq!(img.len(), reference.len());
-    let (rmse, max, _) = parallax_backend::bench::image_error(img, reference);
-    (rmse, max)
+    let e = parallax_backend::metric::image_error(img, reference);
+    (e.rmse, e.max_abs)
 }
 
 /// A translucent transfer function over 0..255: clear below 80, three

@@ -3,7 +3,7 @@
 //! `analytic_average`).
 //!
 //! Between two control points the transfer function is linear in the data
-//! value s (DESIGN.md "Transfer function"): τ(s) = τa + Δτ·x/w and
+//! value s (docs/design.md "Transfer function"): τ(s) = τa + Δτ·x/w and
 //! c(s) = ca + Δc·x/w for x = s − a on a piece [a, a + w]. So τ is linear
 //! and k̃ = τ·c quadratic in x,
 //!

@@ -1,5 +1,5 @@
 //! The transfer function itself: control points, TOML loading and validation,
-//! exact evaluation (DESIGN.md "Transfer function", G10 §4).
+//! exact evaluation (docs/design.md "Transfer function", G10 §4).
 
 use std::path::Path;
 

@@ -1,4 +1,4 @@
-//! Transfer functions (DESIGN.md "Transfer function") and their
+//! Transfer functions (docs/design.md "Transfer function") and their
 //! pre-integration tables (G10 §4 Eq. 2).
 //!
 //! * [`TransferFunction`]: control points loaded from a TOML file of
@@ -17,16 +17,14 @@
 //!   kernel's `preintegration = "analytic"`.
 //! * [`EmptinessTable`]: integer prefix counts that answer "is τ ≡ 0 on
 //!   [min, max]?" conservatively, for empty-space skipping.
-//! * [`presets`]: ParaView colour-map presets and 3D Slicer volume-property
-//!   presets (`presets.xml`, `.vp`, `.vp.json`) converted to transfer
-//!   functions (VTK opacity per unit distance → extinction) and written as
-//!   TOML.
+//!
+//! ParaView and 3D Slicer presets are imported by the back end's
+//! `data::presets`, beside the other importers.
 
 pub mod closed;
 mod empty;
 mod function;
 mod preint;
-pub mod presets;
 
 #[cfg(test)]
 mod tests;

@@ -202,60 +202,14 @@ impl LiveState {
                     self.gamma = within("set.gamma", v, 0.0, 1.0)?;
                 }
             }
-            ClientMsg::Tf { point } => {
-                ensure!(
-                    (2..=256).contains(&point.len()),
-                    "tf.point: {} points (2 to 256)",
-                    point.len()
-                );
-                let pts = point
-                    .into_iter()
-                    .map(|p| {
-                        let mut c =
-                            parallax_common::tf::ControlPoint::new(p.value, p.color, p.extinction);
-                        if let Some(i) = p.importance {
-                            c.importance = i;
-                        }
-                        if let Some(r) = p.refraction {
-                            c.refraction = r;
-                        }
-                        c
-                    })
-                    .collect();
-                self.tf = TransferFunction::from_points(pts).context("tf")?;
-            }
+            ClientMsg::Tf { point } => self.set_tf(point)?,
             ClientMsg::Tool {
                 index,
                 point,
                 normal,
                 thickness,
                 context,
-            } => {
-                let n = self.tools.len();
-                let tool = self
-                    .tools
-                    .get_mut(index)
-                    .with_context(|| format!("tool.index: {index}, the scene has {n} tool(s)"))?;
-                let Tool::ClipPlane(c) = tool else {
-                    bail!("tool {index}: this kind of tool has no pose");
-                };
-                if let Some(p) = point {
-                    c.point = within3("tool.point", p, -10.0, 10.0)?;
-                }
-                if let Some(v) = normal {
-                    c.normal = within3("tool.normal", v, -1e3, 1e3)?;
-                }
-                if let Some(t) = thickness {
-                    c.thickness = within("tool.thickness", t, 0.0, 10.0)?;
-                }
-                if let Some(x) = context {
-                    c.context = [
-                        within("tool.context", x[0], -10.0, 10.0)?,
-                        within("tool.context", x[1], -10.0, 10.0)?,
-                    ];
-                }
-                tool.check(&format!("tool {index}"))?;
-            }
+            } => self.pose_tool(index, point, normal, thickness, context)?,
             ClientMsg::Output { output, eye_x } => {
                 ensure!(
                     outputs(display).contains(&output),
@@ -268,54 +222,117 @@ impl LiveState {
                 }
             }
             ClientMsg::Record { on } => self.recording = on,
-            ClientMsg::State { state } => {
-                let s = *state;
-                // Every field through the same checks as its own message.
-                let mut next = self.clone();
-                next.placement = s.placement;
-                within3("state.placement.center", s.placement.center, -10.0, 10.0)?;
-                within3(
-                    "state.placement.rotation_deg",
-                    s.placement.rotation_deg,
-                    -1e4,
-                    1e4,
-                )?;
-                within("state.placement.size", s.placement.size, 1e-4, 100.0)?;
-                next.apply(
-                    ClientMsg::Set {
-                        eta: Some(s.eta),
-                        accuracy: Some(s.accuracy),
-                        step_factor: Some(s.step_factor),
-                        gamma: Some(s.gamma),
-                    },
-                    display,
-                )?;
-                next.tf = s.tf;
-                ensure!(
-                    s.tools.len() == self.tools.len()
-                        && s.tools
-                            .iter()
-                            .zip(&self.tools)
-                            .all(|(a, b)| a.enhancer() == b.enhancer()),
-                    "state.tools: not this scene's tools"
-                );
-                for (i, t) in s.tools.iter().enumerate() {
-                    t.check(&format!("state.tools {i}"))?;
-                }
-                next.tools = s.tools;
-                next.apply(
-                    ClientMsg::Output {
-                        output: s.output,
-                        eye_x: Some(s.eye_x),
-                    },
-                    display,
-                )?;
-                *self = next;
-            }
+            ClientMsg::State { state } => self.set_state(*state, display)?,
             ClientMsg::Focus { .. } | ClientMsg::Quit => {
                 bail!("not a state change")
             }
         }
+        Ok(())
+    }
+
+    /// A new transfer function from the page's control points.
+    fn set_tf(&mut self, point: Vec<PointMsg>) -> Result<()> {
+        ensure!(
+            (2..=256).contains(&point.len()),
+            "tf.point: {} points (2 to 256)",
+            point.len()
+        );
+        let pts = point
+            .into_iter()
+            .map(|p| {
+                let mut c = parallax_common::tf::ControlPoint::new(p.value, p.color, p.extinction);
+                if let Some(i) = p.importance {
+                    c.importance = i;
+                }
+                if let Some(r) = p.refraction {
+                    c.refraction = r;
+                }
+                c
+            })
+            .collect();
+        self.tf = TransferFunction::from_points(pts).context("tf")?;
+        Ok(())
+    }
+
+    /// A clip plane moved, turned, thickened or given its context band.
+    fn pose_tool(
+        &mut self,
+        index: usize,
+        point: Option<[f64; 3]>,
+        normal: Option<[f64; 3]>,
+        thickness: Option<f64>,
+        context: Option<[f64; 2]>,
+    ) -> Result<()> {
+        let n = self.tools.len();
+        let tool = self
+            .tools
+            .get_mut(index)
+            .with_context(|| format!("tool.index: {index}, the scene has {n} tool(s)"))?;
+        let Tool::ClipPlane(c) = tool else {
+            bail!("tool {index}: this kind of tool has no pose");
+        };
+        if let Some(p) = point {
+            c.point = within3("tool.point", p, -10.0, 10.0)?;
+        }
+        if let Some(v) = normal {
+            c.normal = within3("tool.normal", v, -1e3, 1e3)?;
+        }
+        if let Some(t) = thickness {
+            c.thickness = within("tool.thickness", t, 0.0, 10.0)?;
+        }
+        if let Some(x) = context {
+            c.context = [
+                within("tool.context", x[0], -10.0, 10.0)?,
+                within("tool.context", x[1], -10.0, 10.0)?,
+            ];
+        }
+        tool.check(&format!("tool {index}"))?;
+        Ok(())
+    }
+
+    /// A whole state at once (a reload, a second page): every field through
+    /// the same checks as its own message, applied only if all pass.
+    fn set_state(&mut self, s: LiveState, display: &Display) -> Result<()> {
+        let mut next = self.clone();
+        next.placement = s.placement;
+        within3("state.placement.center", s.placement.center, -10.0, 10.0)?;
+        within3(
+            "state.placement.rotation_deg",
+            s.placement.rotation_deg,
+            -1e4,
+            1e4,
+        )?;
+        within("state.placement.size", s.placement.size, 1e-4, 100.0)?;
+        next.apply(
+            ClientMsg::Set {
+                eta: Some(s.eta),
+                accuracy: Some(s.accuracy),
+                step_factor: Some(s.step_factor),
+                gamma: Some(s.gamma),
+            },
+            display,
+        )?;
+        next.tf = s.tf;
+        ensure!(
+            s.tools.len() == self.tools.len()
+                && s.tools
+                    .iter()
+                    .zip(&self.tools)
+                    .all(|(a, b)| a.enhancer() == b.enhancer()),
+            "state.tools: not this scene's tools"
+        );
+        for (i, t) in s.tools.iter().enumerate() {
+            t.check(&format!("state.tools {i}"))?;
+        }
+        next.tools = s.tools;
+        next.apply(
+            ClientMsg::Output {
+                output: s.output,
+                eye_x: Some(s.eye_x),
+            },
+            display,
+        )?;
+        *self = next;
         Ok(())
     }
 

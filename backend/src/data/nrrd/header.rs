@@ -151,6 +151,203 @@ fn read_line(
     Ok(true)
 }
 
+/// The header's fields as written, before they are checked.
+#[derive(Default)]
+struct Fields {
+    dimension: Option<String>,
+    sizes: Option<String>,
+    type_: Option<String>,
+    encoding: Option<String>,
+    endian: Option<String>,
+    spacings: Option<String>,
+    directions: Option<String>,
+    data_file: Option<String>,
+    byte_skip: Option<String>,
+    line_skip: Option<String>,
+    ended_by_blank_line: bool,
+}
+
+/// Reads the field lines after the magic line, up to the blank line that
+/// ends an attached header (or the end of a detached one).
+fn read_fields(r: &mut BufReader<File>, consumed: &mut u64, label: &str) -> Result<Fields> {
+    let mut f = Fields::default();
+    let mut line = Vec::new();
+    while read_line(r, &mut line, consumed, label)? {
+        if line.is_empty() {
+            f.ended_by_blank_line = true;
+            break;
+        }
+        let text = String::from_utf8_lossy(&line);
+        if text.starts_with('#') {
+            continue;
+        }
+        // "field: value", or "key:=value" (free-form metadata, ignored).
+        let field_sep = text.find(": ").or_else(|| text.find(':'));
+        let Some(at) = field_sep else {
+            bail!("{label}: header line '{text}' is not 'field: value'");
+        };
+        if text[at..].starts_with(":=") || text.find(":=").is_some_and(|kv| kv < at) {
+            continue;
+        }
+        let (field, value) = (&text[..at], text[at + 1..].trim());
+        let value = Some(value.to_string());
+        match field.trim().to_ascii_lowercase().as_str() {
+            "dimension" => f.dimension = value,
+            "sizes" => f.sizes = value,
+            "type" => f.type_ = value,
+            "encoding" => f.encoding = value,
+            "endian" => f.endian = value,
+            "spacings" => f.spacings = value,
+            "space directions" => f.directions = value,
+            "data file" | "datafile" => f.data_file = value,
+            "byte skip" | "byteskip" => f.byte_skip = value,
+            "line skip" | "lineskip" => f.line_skip = value,
+            _ => {} // content, kinds, space, space origin, units, …: not needed here
+        }
+    }
+    Ok(f)
+}
+
+fn missing(label: &str, f: &str) -> anyhow::Error {
+    anyhow::anyhow!("{label}: missing field '{f}'")
+}
+
+/// The dimension, the sizes of all axes, and the three axes kept: a 4-D
+/// header with a size-1 axis is a 3-D volume (the dropped axis does not
+/// change the memory layout).
+fn axes(label: &str, f: &Fields) -> Result<(usize, Vec<usize>, Vec<usize>)> {
+    let dimension = f
+        .dimension
+        .as_ref()
+        .ok_or_else(|| missing(label, "dimension"))?;
+    let dimension: usize = dimension
+        .parse()
+        .map_err(|_| anyhow::anyhow!("{label}: dimension: '{dimension}' is not a number"))?;
+    let sizes_text = f.sizes.as_ref().ok_or_else(|| missing(label, "sizes"))?;
+    let mut sizes = Vec::new();
+    for s in sizes_text.split_whitespace() {
+        sizes.push(
+            s.parse::<usize>()
+                .map_err(|_| anyhow::anyhow!("{label}: sizes: '{s}' is not a size"))?,
+        );
+    }
+    ensure!(
+        sizes.len() == dimension,
+        "{label}: sizes: {} sizes for dimension {dimension}",
+        sizes.len()
+    );
+    let keep: Vec<usize> = match dimension {
+        3 => vec![0, 1, 2],
+        4 => match sizes.iter().position(|&s| s == 1) {
+            Some(drop) => (0..4).filter(|&a| a != drop).collect(),
+            None => bail!(
+                "{label}: dimension: 4 with sizes {sizes_text} is not a scalar volume \
+                 (need 3 dimensions, or 4 with an axis of size 1)"
+            ),
+        },
+        d => bail!("{label}: dimension: {d} is not supported (need a 3-dimensional volume)"),
+    };
+    Ok((dimension, sizes, keep))
+}
+
+/// The kept axes' spacing, from the space directions' lengths or the
+/// spacings (unit voxels without either), and the field it came from.
+fn spacing_of(
+    label: &str,
+    f: &Fields,
+    dimension: usize,
+    keep: &[usize],
+) -> Result<([f64; 3], &'static str)> {
+    if let Some(d) = &f.directions {
+        let norms = parse_space_directions(label, d)?;
+        ensure!(
+            norms.len() == dimension,
+            "{label}: space directions: {} entries for dimension {dimension}",
+            norms.len()
+        );
+        let mut s = [0.0; 3];
+        for (a, &axis) in keep.iter().enumerate() {
+            s[a] = norms[axis].ok_or_else(|| {
+                anyhow::anyhow!("{label}: space directions: axis {axis} is 'none' but holds voxels")
+            })?;
+        }
+        Ok((s, "space directions"))
+    } else if let Some(sp) = &f.spacings {
+        let mut values = Vec::new();
+        for t in sp.split_whitespace() {
+            values.push(
+                t.parse::<f64>()
+                    .map_err(|_| anyhow::anyhow!("{label}: spacings: '{t}' is not a number"))?,
+            );
+        }
+        ensure!(
+            values.len() == dimension,
+            "{label}: spacings: {} values for dimension {dimension}",
+            values.len()
+        );
+        Ok((
+            [values[keep[0]], values[keep[1]], values[keep[2]]],
+            "spacings",
+        ))
+    } else {
+        Ok(([1.0; 3], "spacings")) // no spacing given: unit voxels
+    }
+}
+
+/// The byte skip (−1: the data are the file's last bytes, raw only) and
+/// the line skip.
+fn skips(label: &str, f: &Fields, encoding: NrrdEncoding) -> Result<(i64, u64)> {
+    let byte_skip = match &f.byte_skip {
+        None => 0,
+        Some(b) => {
+            let v: i64 = b
+                .parse()
+                .map_err(|_| anyhow::anyhow!("{label}: byte skip: '{b}' is not a number"))?;
+            ensure!(v >= -1, "{label}: byte skip: {v} is negative");
+            ensure!(
+                v != -1 || encoding == NrrdEncoding::Raw,
+                "{label}: byte skip: -1 is only allowed with raw encoding"
+            );
+            v
+        }
+    };
+    let line_skip = match &f.line_skip {
+        None => 0,
+        Some(l) => l
+            .parse::<u64>()
+            .map_err(|_| anyhow::anyhow!("{label}: line skip: '{l}' is not a number"))?,
+    };
+    Ok((byte_skip, line_skip))
+}
+
+/// The detached data file, relative to the header's folder, or none where
+/// the data follow the header's blank line.
+fn data_file_of(label: &str, path: &Path, f: &Fields) -> Result<Option<PathBuf>> {
+    match &f.data_file {
+        None => {
+            ensure!(
+                f.ended_by_blank_line,
+                "{label}: no data after the header (attached data must follow a blank line)"
+            );
+            Ok(None)
+        }
+        Some(file) => {
+            let multi = file.starts_with("LIST")
+                || (file.contains('%') && file.split_whitespace().count() > 1);
+            ensure!(
+                !multi,
+                "{label}: data file: '{file}' names several files, which is not supported"
+            );
+            let p = Path::new(file);
+            Ok(Some(if p.is_absolute() {
+                p.to_path_buf()
+            } else {
+                path.parent().unwrap_or(Path::new("")).join(p)
+            }))
+        }
+    }
+}
+
 /// Parses the header of `path` and returns it with the file positioned just
 /// after the header (where attached data begins) and the header's length.
 pub fn read_header(path: &Path) -> Result<(NrrdHeader, BufReader<File>, u64)> {
@@ -166,88 +363,21 @@ pub fn read_header(path: &Path) -> Result<(NrrdHeader, BufReader<File>, u64)> {
         magic_ok,
         "{label}: not a NRRD file (the first line must be NRRD000X)"
     );
-
-    let mut dimension = None;
-    let mut sizes = None;
-    let mut type_ = None;
-    let mut encoding = None;
-    let mut endian = None;
-    let mut spacings = None;
-    let mut directions = None;
-    let mut data_file = None;
-    let mut byte_skip = None;
-    let mut line_skip = None;
-    let mut ended_by_blank_line = false;
-    while read_line(&mut r, &mut line, &mut consumed, &label)? {
-        if line.is_empty() {
-            ended_by_blank_line = true;
-            break;
-        }
-        let text = String::from_utf8_lossy(&line);
-        if text.starts_with('#') {
-            continue;
-        }
-        // "field: value", or "key:=value" (free-form metadata, ignored).
-        let field_sep = text.find(": ").or_else(|| text.find(':'));
-        let Some(f) = field_sep else {
-            bail!("{label}: header line '{text}' is not 'field: value'");
-        };
-        if text[f..].starts_with(":=") || text.find(":=").is_some_and(|kv| kv < f) {
-            continue;
-        }
-        let (field, value) = (&text[..f], text[f + 1..].trim());
-        let value = value.to_string();
-        match field.trim().to_ascii_lowercase().as_str() {
-            "dimension" => dimension = Some(value),
-            "sizes" => sizes = Some(value),
-            "type" => type_ = Some(value),
-            "encoding" => encoding = Some(value),
-            "endian" => endian = Some(value),
-            "spacings" => spacings = Some(value),
-            "space directions" => directions = Some(value),
-            "data file" | "datafile" => data_file = Some(value),
-            "byte skip" | "byteskip" => byte_skip = Some(value),
-            "line skip" | "lineskip" => line_skip = Some(value),
-            _ => {} // content, kinds, space, space origin, units, …: not needed here
-        }
-    }
-
-    let missing = |f: &str| anyhow::anyhow!("{label}: missing field '{f}'");
-    let dimension = dimension.ok_or_else(|| missing("dimension"))?;
-    let dimension: usize = dimension
-        .parse()
-        .map_err(|_| anyhow::anyhow!("{label}: dimension: '{dimension}' is not a number"))?;
-    let sizes_text = sizes.ok_or_else(|| missing("sizes"))?;
-    let mut sizes = Vec::new();
-    for s in sizes_text.split_whitespace() {
-        sizes.push(
-            s.parse::<usize>()
-                .map_err(|_| anyhow::anyhow!("{label}: sizes: '{s}' is not a size"))?,
-        );
-    }
-    ensure!(
-        sizes.len() == dimension,
-        "{label}: sizes: {} sizes for dimension {dimension}",
-        sizes.len()
-    );
-    // Axes to keep: a 4-D header with a size-1 axis is a 3-D volume (the
-    // dropped axis does not change the memory layout).
-    let keep: Vec<usize> = match dimension {
-        3 => vec![0, 1, 2],
-        4 => match sizes.iter().position(|&s| s == 1) {
-            Some(drop) => (0..4).filter(|&a| a != drop).collect(),
-            None => bail!(
-                "{label}: dimension: 4 with sizes {sizes_text} is not a scalar volume \
-                 (need 3 dimensions, or 4 with an axis of size 1)"
-            ),
-        },
-        d => bail!("{label}: dimension: {d} is not supported (need a 3-dimensional volume)"),
-    };
+    let f = read_fields(&mut r, &mut consumed, &label)?;
+    let (dimension, sizes, keep) = axes(&label, &f)?;
     let dims = [sizes[keep[0]], sizes[keep[1]], sizes[keep[2]]];
 
-    let voxel_type = parse_type(&label, &type_.ok_or_else(|| missing("type"))?)?;
-    let encoding = parse_encoding(&label, &encoding.ok_or_else(|| missing("encoding"))?)?;
-    let big_endian = match endian.as_deref() {
+    let voxel_type = parse_type(
+        &label,
+        f.type_.as_ref().ok_or_else(|| missing(&label, "type"))?,
+    )?;
+    let encoding = parse_encoding(
+        &label,
+        f.encoding
+            .as_ref()
+            .ok_or_else(|| missing(&label, "encoding"))?,
+    )?;
+    let big_endian = match f.endian.as_deref() {
         Some("little") => false,
         Some("big") => true,
         Some(e) => bail!("{label}: endian: '{e}' is not 'little' or 'big'"),
@@ -257,94 +387,15 @@ pub fn read_header(path: &Path) -> Result<(NrrdHeader, BufReader<File>, u64)> {
             voxel_type.name()
         ),
     };
-
-    let (spacing, spacing_field) = if let Some(d) = directions {
-        let norms = parse_space_directions(&label, &d)?;
-        ensure!(
-            norms.len() == dimension,
-            "{label}: space directions: {} entries for dimension {dimension}",
-            norms.len()
-        );
-        let mut s = [0.0; 3];
-        for (a, &axis) in keep.iter().enumerate() {
-            s[a] = norms[axis].ok_or_else(|| {
-                anyhow::anyhow!("{label}: space directions: axis {axis} is 'none' but holds voxels")
-            })?;
-        }
-        (s, "space directions")
-    } else if let Some(sp) = spacings {
-        let mut values = Vec::new();
-        for t in sp.split_whitespace() {
-            values.push(
-                t.parse::<f64>()
-                    .map_err(|_| anyhow::anyhow!("{label}: spacings: '{t}' is not a number"))?,
-            );
-        }
-        ensure!(
-            values.len() == dimension,
-            "{label}: spacings: {} values for dimension {dimension}",
-            values.len()
-        );
-        (
-            [values[keep[0]], values[keep[1]], values[keep[2]]],
-            "spacings",
-        )
-    } else {
-        ([1.0; 3], "spacings") // no spacing given: unit voxels
-    };
-
+    let (spacing, spacing_field) = spacing_of(&label, &f, dimension, &keep)?;
     let info = VolumeInfo {
         dims,
         spacing,
         voxel_type,
     };
     check_info(&label, &info, "sizes", spacing_field)?;
-
-    let byte_skip = match byte_skip {
-        None => 0,
-        Some(b) => {
-            let v: i64 = b
-                .parse()
-                .map_err(|_| anyhow::anyhow!("{label}: byte skip: '{b}' is not a number"))?;
-            ensure!(v >= -1, "{label}: byte skip: {v} is negative");
-            ensure!(
-                v != -1 || encoding == NrrdEncoding::Raw,
-                "{label}: byte skip: -1 is only allowed with raw encoding"
-            );
-            v
-        }
-    };
-    let line_skip = match line_skip {
-        None => 0,
-        Some(l) => l
-            .parse::<u64>()
-            .map_err(|_| anyhow::anyhow!("{label}: line skip: '{l}' is not a number"))?,
-    };
-
-    let data_file = match data_file {
-        None => {
-            ensure!(
-                ended_by_blank_line,
-                "{label}: no data after the header (attached data must follow a blank line)"
-            );
-            None
-        }
-        Some(f) => {
-            let multi =
-                f.starts_with("LIST") || (f.contains('%') && f.split_whitespace().count() > 1);
-            ensure!(
-                !multi,
-                "{label}: data file: '{f}' names several files, which is not supported"
-            );
-            let p = Path::new(&f);
-            Some(if p.is_absolute() {
-                p.to_path_buf()
-            } else {
-                path.parent().unwrap_or(Path::new("")).join(p)
-            })
-        }
-    };
-
+    let (byte_skip, line_skip) = skips(&label, &f, encoding)?;
+    let data_file = data_file_of(&label, path, &f)?;
     Ok((
         NrrdHeader {
             info,

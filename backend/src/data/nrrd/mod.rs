@@ -1,7 +1,7 @@
 //! NRRD input and output (<http://teem.sourceforge.net/nrrd/format.html>).
 //!
 //! NRRD is the format Parallax writes for procedural volumes and the one most
-//! volume tools can exchange with it (DESIGN.md "Data"). The reader handles
+//! volume tools can exchange with it (docs/design.md "Data"). The reader handles
 //! what such tools write for a 3-D scalar volume: attached (`.nrrd`) and
 //! detached (`.nhdr` + `data file`) headers, `raw`, `gzip` and `ascii` encodings,
 //! either byte order, `spacings` or `space directions`. The writer streams

@@ -27,7 +27,7 @@ fn type_name(t: VoxelType) -> &'static str {
 ///
 /// The file is written through [`AtomicFile`] and appears on [`finish`], so a
 /// crash or an error never leaves a half-written volume under the final name
-/// (the same rule as the database, DESIGN.md "Data"). Dropping an unfinished
+/// (the same rule as the database, docs/design.md "Data"). Dropping an unfinished
 /// writer removes the temporary file.
 ///
 /// [`finish`]: NrrdWriter::finish

@@ -1,0 +1,108 @@
+//! The ray caster's quality knobs and the kernel a frame uses.
+
+use super::{KernelKey, ToolParams};
+use parallax_common::config::Preintegration;
+use parallax_common::tools::MAX_ENHANCERS;
+
+/// Quality knobs of the ray caster, and the kernel a frame uses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Step length as a fraction of the leaf's voxel size.
+    pub step_factor: f32,
+    /// Rays stop once their opacity reaches this.
+    pub early_termination: f32,
+    /// Phong shading from central-difference gradients.
+    pub shading: bool,
+    /// Stepper and enhancer chain (G10 §5: one kernel per combination).
+    pub kernel: KernelKey,
+    /// MImDA γ (G10 Eq. 3).
+    pub gamma: f32,
+    /// Isovalue and surface colour (linear RGB) of the isosurface stepper.
+    pub iso: [f32; 4],
+    /// Render only this quincunx sub-frame (frame reconstruction, G10 §5).
+    pub subframe: Option<u32>,
+    /// With `subframe`: reconstruct the other pixels on the GPU before the
+    /// read-back (`subframes`), first forgetting the history where
+    /// `Some(true)`. `None`: the image comes back with the sub-frame's
+    /// pixels alone.
+    pub reconstruct: Option<bool>,
+    /// Prediction buffer (B10 §4): mode (0 off, 1 full traversal, 2
+    /// predicted), local window (data units), κ low, κ high.
+    pub predict: [f32; 4],
+    /// The enhancers' constant parameters, in chain order.
+    pub tools: [ToolParams; MAX_ENHANCERS],
+    /// Step over empty macrocells (L12 §4.1) where the kernel allows it
+    /// (plain DVR: no enhancer, MImDA, refraction or isosurface, which may
+    /// act where τ = 0).
+    pub macrocells: bool,
+    /// Count the samples taken (`Rendered::samples`).
+    pub count_samples: bool,
+    /// L12's adaptive step (Eq. 3): `step_factor` × 2·t·sin(θ/2), a
+    /// fraction of the pixel's footprint at the leaf's distance, instead of
+    /// the leaf's voxel.
+    pub adaptive_step: bool,
+    /// Multilevel sampling (G10 §4, Fig. 5): samples blend the leaf's data
+    /// with its parent's and grandparent's as the view's footprint asks,
+    /// so a cut that mixes levels shows no seams. `None`: off.
+    pub multilevel: Option<Multilevel>,
+    /// Tricubic B-spline filtering (L12 §5.1) instead of trilinear.
+    pub tricubic: bool,
+    /// How segment optics are looked up: the exact table (from the
+    /// segments' ends where it allows), the 2D table bilinearly (it must
+    /// have been made: [`TfTable::build_grid`]), or in closed form (where
+    /// the function has one, [`TfTable::has_closed_form`]; else as "2d").
+    pub preintegration: Preintegration,
+    /// Run only the 8×8 tiles whose rays can meet data (`tiles`); off,
+    /// every tile of every view.
+    pub tile_culling: bool,
+    /// Fetch each sample one pass of the sample loop ahead (the kernel's
+    /// LOOKAHEAD), on pools of float voxels read with the 2D table; the
+    /// image is the same bit for bit, off only to show that.
+    pub lookahead: bool,
+}
+
+/// What multilevel sampling needs to know of refinement: the same footprint
+/// and accuracy decide which levels a sample blends.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Multilevel {
+    /// Refinement's accuracy: a voxel is adequate when it projects to at
+    /// most this many pixels.
+    pub accuracy: f32,
+    /// The light field display whose s(z) sizes the η > 0 views' detail:
+    /// s0 (m) and tan(Φ/2).
+    pub lightfield: Option<(f32, f32)>,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            step_factor: 0.5,
+            early_termination: 0.999,
+            shading: false,
+            kernel: KernelKey::default(),
+            gamma: 0.0,
+            iso: [0.0; 4],
+            subframe: None,
+            reconstruct: None,
+            predict: [0.0; 4],
+            tools: [ToolParams::default(); MAX_ENHANCERS],
+            macrocells: true,
+            count_samples: false,
+            adaptive_step: false,
+            multilevel: None,
+            tricubic: false,
+            preintegration: Preintegration::Exact,
+            tile_culling: true,
+            lookahead: true,
+        }
+    }
+}
+
+/// How bricks are interpolated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Filtering {
+    /// By the texture unit (one sample; weights at the hardware's precision).
+    Hardware,
+    /// By eight loads with exact f32 weights.
+    Exact,
+}

@@ -1,0 +1,183 @@
+//! `parallax bench <study>`: the studies of the `parallax-bench` crate.
+
+use super::args;
+use anyhow::Result;
+use clap::Subcommand;
+use parallax_backend::data;
+use parallax_backend::store::BrickEncoding;
+use parallax_bench::sequence::{self, Sequence};
+use std::path::{Path, PathBuf};
+
+/// Measure the renderer: error against the exact integral and time.
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    study: Study,
+}
+
+/// Where the studies of Colin27 find their inputs.
+#[derive(clap::Args)]
+struct Inputs {
+    /// A volume file (the reference integral needs it in memory).
+    #[arg(long, default_value = "/usr/share/mricron/templates/ch2.nii.gz")]
+    volume: PathBuf,
+    /// Transfer function file.
+    #[arg(long, default_value = "configs/tf/colin27-brain.toml")]
+    tf: PathBuf,
+    /// Image size WxH.
+    #[arg(long, default_value = "160x120", value_parser = args::size::<u32>)]
+    size: [u32; 2],
+    #[arg(long, default_value = "out/bench")]
+    out: PathBuf,
+}
+
+/// The interaction script a sequence study runs.
+#[derive(clap::Args)]
+struct ScriptArg {
+    /// Its first N frames are the study's frames.
+    #[arg(long, default_value = "configs/scripts/rotate-1deg.toml")]
+    script: PathBuf,
+}
+
+#[derive(Subcommand)]
+enum Study {
+    /// Error against the exact integral beside frame time for a sweep of
+    /// every quality knob, and the cost of each kernel combination:
+    /// DIR/bench.csv, DIR/bench.svg, DIR/orders.csv and DIR/kernels.csv.
+    Sweep {
+        #[command(flatten)]
+        inputs: Inputs,
+        /// Timed frames per setting (the median is reported).
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+        /// Only the cost of each kernel combination (enhancers, MImDA,
+        /// refraction): DIR/kernels.csv.
+        #[arg(long)]
+        kernels_only: bool,
+    },
+    /// The brick codecs on these volumes: ratio, encode and decode speed of
+    /// each candidate (DIR/codecs.csv).
+    Codecs {
+        #[arg(value_delimiter = ',', num_args = 1.., required = true)]
+        volumes: Vec<PathBuf>,
+        /// Quantisation of the bricks: u8 | u16 | none.
+        #[arg(long, default_value = "u8", value_parser = args::encoding)]
+        quantize: BrickEncoding,
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+    },
+    /// Frame reconstruction against full rendering along the script, this
+    /// many frames (DIR/reconstruction.csv).
+    Reconstruction {
+        frames: usize,
+        #[command(flatten)]
+        inputs: Inputs,
+        #[command(flatten)]
+        script: ScriptArg,
+    },
+    /// The isosurface prediction buffer against full traversal along the
+    /// script, this many frames per κ (DIR/prediction.csv).
+    Prediction {
+        frames: usize,
+        /// The isovalue.
+        #[arg(long, default_value_t = 80.0)]
+        isovalue: f64,
+        #[command(flatten)]
+        inputs: Inputs,
+        #[command(flatten)]
+        script: ScriptArg,
+    },
+    /// The level-of-detail error on a CT phantom with 4 mm slices against
+    /// the same phantom with isotropic voxels (DIR/anisotropy.csv).
+    Anisotropy {
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+    },
+    /// The steps at level changes between bricks, one level of detail per
+    /// brick against multilevel sampling (DIR/seams.csv and the images).
+    Seams {
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+    },
+}
+
+pub fn run(a: Args) -> Result<()> {
+    match a.study {
+        Study::Sweep {
+            inputs,
+            repeats,
+            kernels_only,
+        } => sweep(&inputs, repeats, kernels_only),
+        Study::Codecs {
+            volumes,
+            quantize,
+            out,
+        } => {
+            let points = parallax_bench::codecs::run(&volumes, quantize, &out)?;
+            parallax_bench::codecs::print(&points);
+            wrote(&out, "codecs.csv")
+        }
+        Study::Reconstruction {
+            frames,
+            inputs,
+            script,
+        } => {
+            let s = sequence_of(&inputs, &script.script, frames)?;
+            let points = sequence::reconstruction(&s, &inputs.out)?;
+            sequence::print_reconstruction(&s, &script.script, &points);
+            wrote(&inputs.out, "reconstruction.csv")
+        }
+        Study::Prediction {
+            frames,
+            isovalue,
+            inputs,
+            script,
+        } => {
+            let s = sequence_of(&inputs, &script.script, frames)?;
+            let points = sequence::prediction(&s, isovalue, &sequence::KAPPAS, &inputs.out)?;
+            sequence::print_prediction(&s, &script.script, isovalue, &points);
+            wrote(&inputs.out, "prediction.csv")
+        }
+        Study::Anisotropy { out } => {
+            parallax_bench::anisotropy::run_anisotropy(&out)?;
+            wrote(&out, "anisotropy.csv")
+        }
+        Study::Seams { out } => {
+            parallax_bench::seams::run_seams(&out)?;
+            wrote(&out, "seams.csv")
+        }
+    }
+}
+
+fn sequence_of(inputs: &Inputs, script: &Path, frames: usize) -> Result<Sequence> {
+    Sequence::new(&inputs.volume, &inputs.tf, script, frames, inputs.size)
+}
+
+fn sweep(inputs: &Inputs, repeats: usize, kernels_only: bool) -> Result<()> {
+    let mut src = data::open(&inputs.volume, None)?;
+    let vol = parallax_backend::volume::Volume::read_all(src.as_mut())?;
+    let tf = parallax_common::tf::TransferFunction::load(&inputs.tf)?;
+    parallax_bench::sweep::run(&parallax_bench::sweep::BenchOptions {
+        volume: &vol,
+        tf: &tf,
+        placement: sequence::START,
+        view: sequence::desktop_view(inputs.size),
+        out: &inputs.out,
+        repeats,
+        kernels_only,
+    })?;
+    if kernels_only {
+        wrote(&inputs.out, "kernels.csv")
+    } else {
+        println!(
+            "wrote {0}/bench.csv, {0}/bench.svg, {0}/orders.csv and {0}/kernels.csv",
+            inputs.out.display()
+        );
+        Ok(())
+    }
+}
+
+fn wrote(out: &Path, file: &str) -> Result<()> {
+    println!("wrote {}/{file}", out.display());
+    Ok(())
+}

@@ -1,0 +1,150 @@
+//! `parallax import`: a volume into the out-of-core octree database.
+
+use super::args;
+use anyhow::{bail, Result};
+use clap::ValueEnum;
+use parallax_backend::data::{self, RawParams};
+use parallax_backend::store::codec::Codec;
+use parallax_backend::store::{self, BrickEncoding, ImportOptions};
+use parallax_backend::volume::VoxelType;
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+/// Import a volume into the out-of-core octree database (.pxo).
+#[derive(clap::Args)]
+pub struct Args {
+    /// .nrrd | .nhdr | .nii | .nii.gz | .raw (with --dims/--type/--spacing)
+    /// | .tif/.tiff (multi-page) | a folder of DICOM slices or of TIFFs
+    input: PathBuf,
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Brick side in voxels (overlap excluded).
+    #[arg(long, default_value_t = 32)]
+    brick: usize,
+    /// Drop bricks whose values are all below this value.
+    #[arg(long, allow_hyphen_values = true)]
+    empty_below: Option<f32>,
+    /// u8 | u16 (quantised against each brick's range) | none (full precision)
+    #[arg(long, default_value = "u8", value_parser = args::encoding)]
+    quantize: BrickEncoding,
+    /// Brick compression: lz4 | zstd | zstdN (level 1–19), each optionally
+    /// +delta (a delta pre-filter) or +auto (per brick, the smaller of
+    /// the two).
+    #[arg(long, default_value = "zstd1+auto", value_parser = args::codec)]
+    codec: Codec,
+    /// Memory budget of the import (MiB).
+    #[arg(long, default_value_t = 2048)]
+    memory_mb: usize,
+    /// Halve all three axes at every level even over thick slices (by
+    /// default the levels above anisotropic voxels halve the finer axes
+    /// first, until the voxels are near-cubic)
+    #[arg(long)]
+    isotropic_levels: bool,
+    /// Raw input: X,Y,Z
+    #[arg(long, value_parser = args::list::<usize, 3>)]
+    dims: Option<[usize; 3]>,
+    /// Raw input: u8 | i8 | u16 | i16 | u32 | i32 | f32 | f64
+    #[arg(long = "type", value_parser = args::voxel_type)]
+    voxel_type: Option<VoxelType>,
+    /// Raw or TIFF input: sx,sy,sz (raw default 1,1,1; TIFF default from
+    /// ImageJ metadata, else 1,1,1)
+    #[arg(long, value_parser = args::list::<f64, 3>)]
+    spacing: Option<[f64; 3]>,
+    /// DICOM folder with several series: the SeriesInstanceUID to import
+    /// (or its number in the listing)
+    #[arg(long)]
+    series: Option<String>,
+    /// NaN in float input: refuse (an error naming the voxel) or empty
+    /// ("no data": never shown, never blended into its neighbours)
+    #[arg(long, value_enum, default_value_t = NanPolicy::Refuse)]
+    nan: NanPolicy,
+    /// Raw input: bytes to skip before the data
+    #[arg(long, default_value_t = 0)]
+    byte_offset: u64,
+    /// Raw input: big-endian samples
+    #[arg(long)]
+    big_endian: bool,
+}
+
+/// What NaN in float input means.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum NanPolicy {
+    /// An error naming the voxel.
+    Refuse,
+    /// No data: never shown, never blended into its neighbours.
+    Empty,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let raw = match (a.dims, a.voxel_type) {
+        (Some(d), Some(t)) => Some(RawParams {
+            dims: d,
+            voxel_type: t,
+            spacing: a.spacing.unwrap_or([1.0; 3]),
+            byte_offset: a.byte_offset,
+            big_endian: a.big_endian,
+        }),
+        (None, None) => None,
+        _ => bail!("raw input needs both --dims and --type"),
+    };
+    let mut src = data::open_with(
+        &a.input,
+        &data::InputOptions {
+            raw,
+            series: a.series,
+            spacing: a.spacing,
+            nan_empty: a.nan == NanPolicy::Empty,
+        },
+    )?;
+    let described = src.describe();
+    if let Some(d) = &described {
+        eprintln!("note: {d}");
+    }
+    let opts = ImportOptions {
+        brick: a.brick,
+        encoding: a.quantize,
+        codec: a.codec,
+        empty_below: a.empty_below,
+        memory_mb: a.memory_mb,
+        progress: std::io::stderr().is_terminal(),
+        isotropic_levels: a.isotropic_levels,
+    };
+    let name = a.input.display().to_string();
+    let source = match &described {
+        Some(d) => format!("{name} ({d})"),
+        None => name.clone(),
+    };
+    let r = store::import(src.as_mut(), &a.output, &source, &opts)?;
+    if let Some(note) = src.conversion_note() {
+        eprintln!("note: {note}");
+    }
+    if r.no_data_voxels > 0 {
+        eprintln!(
+            "note: {} voxels are NaN: no data (never shown, never blended into their neighbours)",
+            r.no_data_voxels
+        );
+    }
+    println!(
+        "imported {} → {}: {} nodes ({} stored, {} empty), {:.1} MB → {:.1} MB in {:.2} s ({:.0} MB/s of source)",
+        name,
+        a.output.display(),
+        r.nodes,
+        r.stored,
+        r.empty,
+        r.source_bytes as f64 / 1e6,
+        r.file_bytes as f64 / 1e6,
+        r.seconds,
+        r.source_bytes as f64 / 1e6 / r.seconds.max(1e-9)
+    );
+    if let Some(kb) = peak_rss_kib() {
+        println!("peak resident memory: {:.1} MiB", kb as f64 / 1024.0);
+    }
+    Ok(())
+}
+
+/// Peak resident set size of this process (Linux: VmHWM), in KiB.
+fn peak_rss_kib() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
