@@ -5,8 +5,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # pydicom and tifffile write the DICOM series and TIFF stacks the input tests
-# read; the live page is tested in a real browser (headless Chromium).
-PARALLAX_EXTRA_PACKAGES="python3-pydicom python3-tifffile python3-numpy chromium" . scripts/setup.sh
+# read; the live page is tested in a real browser (headless Chromium). The
+# presented windows are tested on an X server of their own (Xvfb).
+PARALLAX_EXTRA_PACKAGES="python3-pydicom python3-tifffile python3-numpy chromium xvfb libxcb1" . scripts/setup.sh
 cargo build --release --locked 2>&1 | tail -n 3
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT

@@ -576,3 +576,42 @@ fn kernel_dump_writes_the_kernel_and_changes_no_pixel() {
         "{e}"
     );
 }
+
+/// A 100-byte NRRD whose size along x (2^63 + 1, gzip) once wrapped the
+/// octree layout's loop and hung the import: refused within a second,
+/// naming the field, with nothing written.
+#[test]
+fn a_crafted_nrrd_size_is_refused_at_once() {
+    use std::io::Write;
+    let d = tempfile::tempdir().unwrap();
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    gz.write_all(&[0u8; 16]).unwrap();
+    let mut file =
+        b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 9223372036854775809 1 1\nencoding: gzip\n\n"
+            .to_vec();
+    file.extend(gz.finish().unwrap());
+    let nrrd = d.path().join("crafted.nrrd");
+    std::fs::write(&nrrd, &file).unwrap();
+    let pxo = d.path().join("out.pxo");
+    let t = std::time::Instant::now();
+    let o = std::process::Command::new("timeout")
+        .arg("10")
+        .arg(env!("CARGO_BIN_EXE_parallax"))
+        .args([
+            "import",
+            nrrd.to_str().unwrap(),
+            "-o",
+            pxo.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let secs = t.elapsed().as_secs_f64();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("crafted.nrrd: sizes: axis 0 has 9223372036854775809 voxels"),
+        "{err}"
+    );
+    assert!(secs < 1.0, "took {secs:.2} s");
+    assert!(!pxo.exists());
+}

@@ -286,6 +286,7 @@ fn serve_in_process(
         watchdog: Some(Duration::from_secs(120)),
         ready: Some(tx),
         eye_view: parallax::launch::eye_view,
+        present: false,
     };
     let t = std::thread::spawn(move || {
         parallax::launch::embedded(backends, |t| parallax_frontend::live::serve(opts, t))

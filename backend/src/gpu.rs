@@ -204,6 +204,11 @@ pub struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub info: wgpu::AdapterInfo,
+    /// The instance and adapter the device came from: a window's surface
+    /// must be made by the same instance and presented by that adapter
+    /// (`crate::present`).
+    pub instance: wgpu::Instance,
+    pub adapter: wgpu::Adapter,
 }
 
 impl Gpu {
@@ -254,6 +259,8 @@ impl Gpu {
             device,
             queue,
             info,
+            instance,
+            adapter,
         })
     }
 
@@ -263,6 +270,20 @@ impl Gpu {
             .poll(wgpu::PollType::wait_indefinitely())
             .map(|_| ())
             .map_err(|e| anyhow::anyhow!("GPU wait failed: {e}"))
+    }
+
+    /// Maps `slice` of a MAP_READ buffer for reading once the submitted
+    /// work is done; `what` names it in errors. Unmap the buffer after.
+    pub fn map_read(&self, slice: wgpu::BufferSlice, what: &str) -> Result<wgpu::BufferView> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        rx.recv()??;
+        slice
+            .get_mapped_range()
+            .map_err(|e| anyhow::anyhow!("reading back {what}: {e:?}"))
     }
 
     /// Runs `f` inside a validation error scope and fails with the first

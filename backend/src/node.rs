@@ -3,6 +3,7 @@
 //! with the frame's figures (docs/design.md "Process model").
 
 use crate::output;
+use crate::present::Presenter;
 use crate::render::Renderer;
 use anyhow::{Context, Result};
 use parallax_common::camera::View;
@@ -45,6 +46,18 @@ struct Setup {
     mine: Vec<usize>,
     out_dir: Option<PathBuf>,
     float: bool,
+    /// With `--present`: the windows, and the last frame's images, shown
+    /// when the swap lock says so. Declared before the renderer, whose
+    /// device the surfaces belong to.
+    presenter: Option<Presenter>,
+    pending: Vec<Vec<[f32; 4]>>,
+    /// The last frame's images are those in the ray caster's image buffer
+    /// (not filtered on the CPU by frame reconstruction).
+    on_device: bool,
+    /// Each of its projectors' calibration (warp and blend), if any.
+    calibrations: Vec<Option<crate::calibrate::Calibrated>>,
+    /// A Looking Glass's interleaving, made with the first panel.
+    interleaver: Option<crate::lenticular::Interleaver>,
     renderer: Renderer,
 }
 
@@ -73,12 +86,15 @@ pub fn serve(link: &mut dyn Link, backends: usize) -> Result<()> {
         if let Some(e) = &failed {
             match msg {
                 ToBackend::Quit => return Err(failed.take().unwrap()),
-                ToBackend::Frame(_) => link.reply(&error_stats(link.rank(), e))?,
+                ToBackend::Frame(_) | ToBackend::Present { .. } => {
+                    link.reply(&error_stats(link.rank(), e))?
+                }
                 _ => {}
             }
             continue;
         }
-        let frame = matches!(msg, ToBackend::Frame(_));
+        // The front end waits for an answer to these.
+        let frame = matches!(msg, ToBackend::Frame(_) | ToBackend::Present { .. });
         match catch_panic(|| handle(link, backends, &mut setup, msg)) {
             Ok(true) => return Ok(()),
             Ok(false) => {}
@@ -116,6 +132,7 @@ fn handle(
             out_dir,
             float,
             sync_io,
+            present,
         } => {
             let assignment = display.assignment(backends)?;
             let mine = assignment[link.rank() as usize - 1].clone();
@@ -137,11 +154,38 @@ fn handle(
                     angular_accuracy_deg: screen.angular_accuracy_deg,
                 },
             ));
+            let calibrations = mine
+                .iter()
+                .map(|&p| {
+                    let pr = &display.projectors[p];
+                    pr.calibration
+                        .as_ref()
+                        .map(|c| {
+                            crate::calibrate::Calibrated::load(c, &format!("projector {}", pr.id))
+                        })
+                        .transpose()
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let presenter = if present {
+                Some(Presenter::open(
+                    renderer.gpu(),
+                    &display,
+                    &mine,
+                    link.rank(),
+                )?)
+            } else {
+                None
+            };
             *setup = Some(Setup {
                 display,
                 mine,
                 out_dir,
                 float,
+                presenter,
+                pending: Vec::new(),
+                on_device: false,
+                calibrations,
+                interleaver: None,
                 renderer,
             });
         }
@@ -163,6 +207,47 @@ fn handle(
             }
             stats.rss_bytes = parallax_common::resident_bytes();
             link.reply(&stats)?;
+        }
+        ToBackend::Present { frame } => {
+            let s = setup.as_mut().context("present before setup")?;
+            let p = s
+                .presenter
+                .as_mut()
+                .context("present: this session was not set up to present")?;
+            let t = Instant::now();
+            // Straight from the device where nothing is done to the images
+            // on the CPU (a calibration, a Looking Glass's panel, frame
+            // reconstruction's CPU filter).
+            let plain = s.on_device
+                && s.display.looking_glass.is_none()
+                && s.calibrations.iter().all(Option::is_none);
+            let direct = plain && p.direct();
+            if direct {
+                let first: Vec<u64> = s
+                    .mine
+                    .iter()
+                    .scan(0u64, |at, &i| {
+                        let [w, h] = s.display.projectors[i].resolution;
+                        let here = *at;
+                        *at += w as u64 * h as u64;
+                        Some(here)
+                    })
+                    .collect();
+                p.present_direct(s.renderer.gpu(), s.renderer.image_buffer(), &first)?;
+            } else {
+                p.present(s.renderer.gpu(), &s.pending)?;
+            }
+            let since_epoch = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap_or_default();
+            link.reply(&FrameStats {
+                rank: link.rank(),
+                frame,
+                present_us: since_epoch.as_micros() as u64,
+                present_ms: t.elapsed().as_secs_f64() * 1e3,
+                present_direct: direct,
+                ..Default::default()
+            })?;
         }
     }
     Ok(false)
@@ -196,11 +281,16 @@ fn render_frame(s: &mut Setup, state: &FrameState) -> Result<FrameStats> {
         );
     }
     let views = views_for(&s.display, &s.mine, state);
-    let frame = s
+    let mut frame = s
         .renderer
         .frame(state.frame, &state.placement, &views, &state.render)?;
-    let mut stats = frame.stats;
+    let mut stats = std::mem::take(&mut frame.stats);
     let t = Instant::now();
+    for ((img, &pi), c) in frame.images.iter_mut().zip(&s.mine).zip(&s.calibrations) {
+        if let Some(c) = c {
+            *img = c.apply(img, s.display.projectors[pi].resolution);
+        }
+    }
     if let Some(dir) = &s.out_dir {
         let fdir = dir.join(format!("frame_{:05}", state.frame));
         std::fs::create_dir_all(&fdir)
@@ -228,9 +318,45 @@ fn render_frame(s: &mut Setup, state: &FrameState) -> Result<FrameStats> {
             });
         }
     }
+    let panel = looking_glass_panel(s, &frame.images, state.frame)?;
+    s.on_device = !state.render.reconstruction || s.renderer.reconstruct_on_gpu;
+    if s.presenter.is_some() {
+        s.pending = match panel {
+            Some(p) => vec![p],
+            None => frame.images,
+        };
+    }
     stats.output_ms = t.elapsed().as_secs_f64() * 1e3;
     stats.total_ms = start.elapsed().as_secs_f64() * 1e3;
     Ok(stats)
+}
+
+/// A Looking Glass's panel from this frame's views (this back end renders
+/// them all), written as `panel.png` beside the views.
+fn looking_glass_panel(
+    s: &mut Setup,
+    images: &[Vec<[f32; 4]>],
+    frame: u64,
+) -> Result<Option<Vec<[f32; 4]>>> {
+    let Some(lg) = &s.display.looking_glass else {
+        return Ok(None);
+    };
+    anyhow::ensure!(
+        s.mine.len() == s.display.projectors.len(),
+        "a Looking Glass's views are rendered by one back end (run it with one)"
+    );
+    if s.interleaver.is_none() {
+        s.interleaver = Some(crate::lenticular::Interleaver::new(s.renderer.gpu())?);
+    }
+    let il = s.interleaver.as_ref().expect("made above");
+    let size = s.display.projectors[0].resolution;
+    let panel = il.panel(s.renderer.gpu(), lg, images, size)?;
+    if let Some(dir) = &s.out_dir {
+        let [w, h] = lg.screen;
+        let path = dir.join(format!("frame_{frame:05}")).join("panel.png");
+        output::write_png(&path, w, h, &panel)?;
+    }
+    Ok(Some(panel))
 }
 
 /// `PARALLAX_FAULT=<kind>:<rank>:<frame>` makes back end `<rank>` fail at

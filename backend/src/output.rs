@@ -71,6 +71,12 @@ fn srgb_tables() -> &'static SrgbTables {
     })
 }
 
+/// The least linear value of each 8-bit sRGB code (code 0: 0): what a
+/// shader needs to give [`srgb8`]'s codes (`shaders/present.wgsl`).
+pub fn srgb_thresholds() -> [f32; 256] {
+    srgb_tables().threshold
+}
+
 /// Linear [0, 1] → sRGB 8 bit, the same code as the formula for every f32
 /// (NaN and ±∞ give 0), without a power per value.
 pub fn srgb8(v: f32) -> u8 {

@@ -195,6 +195,17 @@ impl Renderer {
         self.loader.set_lightfield(lightfield);
     }
 
+    /// The ray caster's image buffer, holding the last frame's views
+    /// (`Raycaster::image_buffer`).
+    pub fn image_buffer(&self) -> &wgpu::Buffer {
+        self.raycaster.image_buffer()
+    }
+
+    /// The device this renderer draws with (its windows present with it).
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
     pub fn adapter(&self) -> &wgpu::AdapterInfo {
         &self.gpu.info
     }

@@ -329,6 +329,7 @@ fn projector(k: usize, position: [f64; 3], region: Option<[f64; 4]>) -> Projecto
         region,
         rank: None,
         adapter: None,
+        calibration: None,
     }
 }
 
@@ -343,6 +344,8 @@ fn hand_display(projectors: Vec<Projector>, phi_deg: f64) -> Display {
             position: [0.0, 0.0, 1.0],
         },
         projectors,
+        present: Default::default(),
+        looking_glass: None,
     }
 }
 

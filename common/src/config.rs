@@ -408,6 +408,10 @@ struct DisplayFile {
     observer: ObserverFile,
     #[serde(default)]
     projectors: Option<ProjectorList>,
+    #[serde(default)]
+    present: crate::present::Present,
+    #[serde(default)]
+    looking_glass: Option<crate::lenticular::LookingGlass>,
 }
 
 /// One projector (or a window).
@@ -428,14 +432,43 @@ pub struct Projector {
     /// by the back end's node-local rank (backend/src/gpu.rs).
     #[serde(default)]
     pub adapter: Option<String>,
+    /// Its warp and blend map (backend/src/calibrate.rs), applied to its
+    /// image before it is written or presented.
+    #[serde(default)]
+    pub calibration: Option<Calibration>,
 }
 
-/// A display: screen, observer and projectors.
+/// `[calibration]` of a projector file: a homography or a mesh (an MPCDI
+/// 2D warp grid, `.pfm`), and an intensity blend map (`.png`) with its
+/// embedded gamma. File names are relative to the projector file; loading
+/// the display makes them absolute.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Calibration {
+    #[serde(default)]
+    pub homography: Option<[[f64; 3]; 3]>,
+    #[serde(default)]
+    pub mesh: Option<String>,
+    #[serde(default)]
+    pub blend: Option<String>,
+    #[serde(default)]
+    pub blend_gamma: Option<f64>,
+}
+
+/// A display: screen, observer, projectors, and how their images reach
+/// the outputs (`--present`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Display {
     pub screen: Screen,
     pub observer: Observer,
     pub projectors: Vec<Projector>,
+    #[serde(default)]
+    pub present: crate::present::Present,
+    /// A Looking Glass: the projectors are its views, in quilt order, and
+    /// its panel image interleaves them (`panel.png`; on its window with
+    /// `--present`).
+    #[serde(default)]
+    pub looking_glass: Option<crate::lenticular::LookingGlass>,
 }
 
 impl Display {
@@ -508,6 +541,18 @@ impl Display {
                     bail!("{pn}: region width and height must be > 0 (got {r:?})");
                 }
             }
+            let mut p = p;
+            if let Some(c) = p.calibration.as_mut() {
+                for f in [&mut c.mesh, &mut c.blend].into_iter().flatten() {
+                    let abs = resolve(pf, Path::new(f.as_str()));
+                    *f = abs
+                        .to_str()
+                        .with_context(|| {
+                            format!("{pn}: calibration: '{}' is not UTF-8", abs.display())
+                        })?
+                        .to_string();
+                }
+            }
             if let Some(q) = projectors.iter().find(|q: &&Projector| q.id == p.id) {
                 bail!(
                     "{pn}: id '{}' is used by another projector too ({})",
@@ -517,13 +562,42 @@ impl Display {
             }
             projectors.push(p);
         }
-        Ok(Display {
+        let display = Display {
             screen: s,
             observer: Observer {
                 position: d.observer.position,
             },
             projectors,
-        })
+            present: d.present,
+            looking_glass: d.looking_glass,
+        };
+        display.windows(&f.to_string())?;
+        if let Some(lg) = &display.looking_glass {
+            lg.check(&format!("{f}: looking_glass"))?;
+            let n = display.projectors.len();
+            if n != lg.views() as usize {
+                bail!(
+                    "{f}: looking_glass: a quilt of {} views but {n} projectors",
+                    lg.views()
+                );
+            }
+            if display
+                .projectors
+                .iter()
+                .any(|p| p.resolution != display.projectors[0].resolution)
+            {
+                bail!("{f}: looking_glass: every view (projector) must have the same resolution");
+            }
+        }
+        Ok(display)
+    }
+
+    /// The windows `--present` opens (checked when the file is loaded;
+    /// `what` names the display in errors).
+    pub fn windows(&self, what: &str) -> Result<Vec<crate::present::Window>> {
+        let ids: Vec<String> = self.projectors.iter().map(|p| p.id.clone()).collect();
+        let res: Vec<[u32; 2]> = self.projectors.iter().map(|p| p.resolution).collect();
+        self.present.windows(&ids, &res, what)
     }
 
     /// Which projectors each back end renders: `result[r]` lists the

@@ -5,16 +5,20 @@
 //! * [`atomic`]: the one way a file is written whole (temporary file, persist).
 //! * [`camera`]: placement and the MCOP ray of a pixel (G10 §4 Eq. 1).
 //! * [`config`]: scene and display files.
+//! * [`lenticular`]: a Looking Glass's calibration and its sub-pixel mapping.
 //! * [`protocol`]: the messages between the front end and the back ends.
 //! * [`tf`]: transfer functions and their pre-integration tables (G10 §4).
 //! * [`tools`]: tools (clip plane, …) and the enhancers they drive (G10 §4).
 //! * [`wall`]: generated light field walls (G10 §6).
+//! * [`present`]: how a display's images reach its outputs (windows, viewports).
 //! * [`paths`]: paths as bytes on the wire, names checked before they become files.
 
 pub mod atomic;
 pub mod camera;
 pub mod config;
+pub mod lenticular;
 pub mod paths;
+pub mod present;
 pub mod protocol;
 pub mod tf;
 pub mod tools;

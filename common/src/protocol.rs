@@ -67,6 +67,9 @@ pub enum ToBackend {
         /// that a frame depends only on the frames before it (tests and
         /// comparisons between runs); interactive use never waits.
         sync_io: bool,
+        /// Open the display's windows (`display.present`) and show every
+        /// frame on them when told to ([`ToBackend::Present`]).
+        present: bool,
     },
     TransferFunction {
         version: u64,
@@ -79,6 +82,12 @@ pub enum ToBackend {
         tools: Vec<crate::tools::Tool>,
     },
     Frame(FrameState),
+    /// Swap lock: every back end has rendered this frame (the coordinator
+    /// has all their stats); show it now. Each back end answers with a
+    /// [`FrameStats`] that holds only its present figures.
+    Present {
+        frame: u64,
+    },
     Quit,
 }
 
@@ -150,6 +159,18 @@ pub struct FrameStats {
     /// ray's opacity reaches ½, if any (first back end only).
     #[serde(default)]
     pub pick: Option<[f64; 3]>,
+    /// With `--present`: when this back end's windows were handed the frame
+    /// (microseconds since the Unix epoch; the spread across ranks is the
+    /// swap lock's), and how long converting and handing them took (ms).
+    #[serde(default)]
+    pub present_us: u64,
+    #[serde(default)]
+    pub present_ms: f64,
+    /// Whether the windows were drawn straight from the renderer's image
+    /// buffer on the device (no read-back), rather than from the images
+    /// read back (as a calibration or a Looking Glass panel needs).
+    #[serde(default)]
+    pub present_direct: bool,
 }
 
 /// A limit that stopped refinement short of adequate, which the user can
@@ -422,6 +443,7 @@ mod tests {
             out_dir: Some(dir.clone()),
             float: true,
             sync_io: false,
+            present: true,
         };
         assert_eq!(
             decode::<ToBackend>(&encode(&setup).unwrap()).unwrap(),

@@ -35,6 +35,10 @@ pub struct RunOptions {
     /// How long to wait for a back end's reply before naming it and ending
     /// the run (`None`: forever).
     pub watchdog: Option<std::time::Duration>,
+    /// Show every frame on the display's outputs, all back ends together
+    /// (swap lock: each presents frame N once every back end has rendered
+    /// it), and keep the last one up this many seconds after the run.
+    pub present: Option<f64>,
 }
 
 /// Frames rendered at most when none are asked for and no script sets them.
@@ -51,6 +55,9 @@ pub struct RunSummary {
     /// Per frame: front-end wall time not spent inside the slowest back
     /// end's frame — what coordination (broadcast, gather, swap lock) costs.
     pub coordination_ms: Vec<f64>,
+    /// Per frame with `present`: the latest minus the earliest back end's
+    /// present time (ms).
+    pub present_spread_ms: Vec<f64>,
 }
 
 /// The display a scene renders to.
@@ -127,6 +134,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         out_dir: opts.out.clone(),
         float: opts.float,
         sync_io: opts.sync_io,
+        present: opts.present.is_some(),
     })?;
     transport.broadcast(&ToBackend::TransferFunction { version: 1, tf })?;
     transport.broadcast(&ToBackend::Tools {
@@ -169,7 +177,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             .state_bytes
             .push(parallax_common::protocol::encode(&msg)?.len());
         transport.broadcast(&msg)?;
-        let stats = transport.gather()?;
+        let mut stats = transport.gather()?;
         summary.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
         if let Some(bad) = stats.iter().find(|s| s.error.is_some()) {
             bail!(
@@ -177,6 +185,10 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
                 bad.rank,
                 bad.error.as_deref().unwrap_or("")
             );
+        }
+        if opts.present.is_some() {
+            let spread = swap(transport, frame, &mut stats)?;
+            summary.present_spread_ms.push(spread);
         }
         notes.report(&stats);
         // Both files are flushed every frame: a run that is killed keeps
@@ -200,6 +212,10 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         if until_converged && frame + 1 == frames {
             eprintln!("note: the cut had not converged after {frames} frames");
         }
+    }
+    if let Some(hold) = opts.present.filter(|&h| h > 0.0) {
+        // The windows keep showing the last frame until the back ends quit.
+        std::thread::sleep(std::time::Duration::from_secs_f64(hold));
     }
     for f in [stats_file, frontend_file].into_iter().flatten() {
         f.into_inner()
@@ -289,6 +305,7 @@ fn write_frontend_line(
         "coordination_ms": summary.coordination_ms.last().unwrap(),
         "state_bytes": summary.state_bytes.last().unwrap(),
         "backends": backends,
+        "present_spread_ms": summary.present_spread_ms.last(),
     });
     serde_json::to_writer(&mut *f, &line)?;
     f.write_all(b"\n")?;
@@ -309,8 +326,52 @@ impl RunSummary {
             coord,
             100.0 * coord / wall.max(1e-9),
             self.state_bytes.iter().max().unwrap()
+        ) + &self.spread_line()
+    }
+
+    /// The swap lock's spread over the run: median and largest (ms).
+    fn spread_line(&self) -> String {
+        if self.present_spread_ms.is_empty() {
+            return String::new();
+        }
+        let mut v = self.present_spread_ms.clone();
+        v.sort_by(f64::total_cmp);
+        format!(
+            "; present spread across ranks {:.2} ms median, {:.2} ms largest",
+            v[v.len() / 2],
+            v[v.len() - 1]
         )
     }
+}
+
+/// The swap lock (G10 §5): every back end has rendered `frame` (its stats
+/// are in); tell them all to present it, gather when each did, and put
+/// those times into the frame's stats. Returns the spread across back ends
+/// (ms).
+pub(crate) fn swap(
+    transport: &mut dyn Transport,
+    frame: u64,
+    stats: &mut [FrameStats],
+) -> Result<f64> {
+    transport.broadcast(&ToBackend::Present { frame })?;
+    let shown = transport.gather()?;
+    if let Some(bad) = shown.iter().find(|s| s.error.is_some()) {
+        bail!(
+            "back end {} failed to present frame {frame}: {}",
+            bad.rank,
+            bad.error.as_deref().unwrap_or("")
+        );
+    }
+    for s in stats.iter_mut() {
+        if let Some(p) = shown.iter().find(|p| p.rank == s.rank) {
+            s.present_us = p.present_us;
+            s.present_ms = p.present_ms;
+            s.present_direct = p.present_direct;
+        }
+    }
+    let times = shown.iter().map(|s| s.present_us);
+    let spread = times.clone().max().unwrap_or(0) - times.min().unwrap_or(0);
+    Ok(spread as f64 / 1e3)
 }
 
 /// What the user is told once per run, not once per frame: limits that held

@@ -83,6 +83,14 @@ pub fn watchdog(seconds: f64) -> anyhow::Result<Option<std::time::Duration>> {
     Ok((seconds > 0.0).then(|| std::time::Duration::from_secs_f64(seconds)))
 }
 
+/// `--hold`: seconds from 0 to a day.
+pub fn hold(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if (0.0..=86_400.0).contains(&v) => Ok(v),
+        _ => Err("expected seconds from 0 to 86400".into()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

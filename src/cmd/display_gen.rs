@@ -1,4 +1,5 @@
-//! `parallax display-gen`: a HoloVizio-like light field wall.
+//! `parallax display-gen`: a HoloVizio-like light field wall, or a Looking
+//! Glass from its calibration.
 
 use super::args;
 use anyhow::Result;
@@ -36,11 +37,28 @@ pub struct Args {
     /// arc | line
     #[arg(long, default_value = "arc", value_parser = args::layout)]
     layout: parallax_common::wall::Layout,
+    /// A Looking Glass instead of a wall: its calibration file
+    /// (`visual.json`, on the device's drive under LKG_calibration/).
+    #[arg(long)]
+    looking_glass: Option<PathBuf>,
+    /// With --looking-glass: the quilt, COLSxROWS views.
+    #[arg(long, default_value = "8x6", value_parser = args::size::<u32>)]
+    quilt: [u32; 2],
+    /// With --looking-glass: each view's WxH (pixels).
+    #[arg(long, default_value = "420x560", value_parser = args::size::<u32>)]
+    view_size: [u32; 2],
+    /// With --looking-glass: the viewing distance (m; default: where the
+    /// panel's height spans 14°, as Looking Glass's cameras see it).
+    #[arg(long)]
+    view_distance: Option<f64>,
     #[arg(short, long)]
     output: PathBuf,
 }
 
 pub fn run(a: Args) -> Result<()> {
+    if let Some(file) = &a.looking_glass {
+        return looking_glass(file, &a);
+    }
     let spec = parallax_common::wall::WallSpec {
         projectors: a.projectors,
         resolution: a.resolution,
@@ -59,6 +77,25 @@ pub fn run(a: Args) -> Result<()> {
         "wrote {}/display.toml and {} projector files",
         a.output.display(),
         a.projectors
+    );
+    Ok(())
+}
+
+fn looking_glass(file: &std::path::Path, a: &Args) -> Result<()> {
+    use anyhow::Context;
+    let f = file.display().to_string();
+    let text = std::fs::read_to_string(file).with_context(|| format!("{f}: cannot read"))?;
+    let lg = parallax_common::lenticular::LookingGlass::from_visual_json(&text, a.quilt, &f)?;
+    let distance = a
+        .view_distance
+        .unwrap_or_else(|| 0.5 * lg.size_m()[1] / 7f64.to_radians().tan());
+    lg.write_display(&a.output, a.view_size, distance)?;
+    println!(
+        "wrote {}/display.toml and {} views of {}×{} (render with η = 1 and one back end; the panel is panel.png)",
+        a.output.display(),
+        lg.views(),
+        a.view_size[0],
+        a.view_size[1]
     );
     Ok(())
 }

@@ -3,6 +3,7 @@
 
 mod args;
 pub mod bench;
+pub mod calibrate;
 pub mod display_gen;
 pub mod import;
 pub mod info;
@@ -28,6 +29,7 @@ pub enum Command {
     Simulate(simulate::Args),
     Quilt(quilt::Args),
     Info(info::Args),
+    Calibrate(calibrate::Args),
 }
 
 /// Runs one command.
@@ -43,5 +45,6 @@ pub fn run(command: Command) -> Result<()> {
         Command::Simulate(a) => simulate::run(a),
         Command::Quilt(a) => quilt::run(a),
         Command::Info(a) => info::run(a),
+        Command::Calibrate(a) => calibrate::run(a),
     }
 }

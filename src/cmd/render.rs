@@ -33,6 +33,15 @@ pub struct Args {
     /// the highest rank the display's projector files name, or 1).
     #[arg(long)]
     backends: Option<usize>,
+    /// Show every frame on the display's outputs (the display file's
+    /// `[present]`: a borderless window per output, each projector at its
+    /// viewport), all back ends presenting together (swap lock).
+    #[arg(long)]
+    present: bool,
+    /// With --present: keep the last frame on the outputs this many
+    /// seconds after the run.
+    #[arg(long, default_value_t = 0.0, requires = "present", value_parser = args::hold)]
+    hold: f64,
     /// Seconds to wait for a back end's frame before naming it and
     /// ending the run (0: wait forever).
     #[arg(long, default_value_t = parallax_common::protocol::DEFAULT_WATCHDOG.as_secs_f64())]
@@ -55,6 +64,7 @@ pub fn run(a: Args) -> Result<()> {
         script: a.script,
         verbose: true,
         watchdog,
+        present: a.present.then_some(a.hold),
     };
     let role = launch::session(&opts.scene, opts.display.as_ref(), a.backends, |t| {
         parallax_frontend::run(&opts, t).map(|_| ())

@@ -33,6 +33,10 @@ pub struct Args {
     /// Where the page's record control writes its sessions.
     #[arg(long, default_value = "out/live")]
     record_dir: PathBuf,
+    /// Show every frame on the display's outputs too, all back ends
+    /// together (as `render --present`).
+    #[arg(long)]
+    present: bool,
     /// Embedded back-end threads (default: from the display).
     #[arg(long)]
     backends: Option<usize>,
@@ -55,6 +59,7 @@ pub fn run(a: Args) -> Result<()> {
         watchdog: args::watchdog(a.watchdog)?,
         ready: None,
         eye_view: launch::eye_view,
+        present: a.present,
     };
     launch::session(
         &a.target.scene,

@@ -159,6 +159,8 @@ pub(crate) fn shape_text(dims: [usize; 3], voxel_type: VoxelType) -> String {
 /// [`VolumeInfo`]: no zero dimension, and a finite positive spacing (the
 /// volume-space box [0, N·s] of docs/design.md must be a real box). `dims_field`
 /// and `spacing_field` name where the values came from in the file.
+use crate::store::reader::MAX_DIM;
+
 pub(crate) fn check_info(
     label: &str,
     info: &VolumeInfo,
@@ -168,6 +170,12 @@ pub(crate) fn check_info(
     for (axis, &n) in info.dims.iter().enumerate() {
         if n == 0 {
             bail!("{label}: {dims_field}: axis {axis} has size 0");
+        }
+        // The one cap every importer checks before it allocates or loops:
+        // the largest side a database may hold (the store's reader refuses
+        // more), so that no octree layout or memory estimate can wrap.
+        if n > MAX_DIM {
+            bail!("{label}: {dims_field}: axis {axis} has {n} voxels; a volume may have at most {MAX_DIM} (2^24) along an axis");
         }
     }
     for (axis, &s) in info.spacing.iter().enumerate() {
@@ -430,7 +438,7 @@ mod tests {
     #[test]
     fn absurd_sizes_are_rejected_not_overflowed() {
         let info = VolumeInfo {
-            dims: [usize::MAX / 2, 1 << 20, 1 << 20],
+            dims: [1 << 24, 1 << 24, 1 << 24],
             spacing: [1.0; 3],
             voxel_type: VoxelType::F32,
         };
@@ -438,6 +446,18 @@ mod tests {
         assert_eq!(
             err.to_string(),
             "big.nrrd: sizes: the volume is too large to address"
+        );
+        // A side past the cap, as a crafted header gives (2^63 + 1 once
+        // wrapped the octree layout's loop).
+        let info = VolumeInfo {
+            dims: [(1 << 63) + 1, 1, 1],
+            ..info
+        };
+        let err = check_info("big.nrrd", &info, "sizes", "spacings").unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("big.nrrd: sizes: axis 0 has 9223372036854775809 voxels; a volume may have at most 16777216"),
+            "{err}"
         );
     }
 

@@ -148,6 +148,13 @@ impl Raycaster {
         self.pipelines.len()
     }
 
+    /// The buffer that holds the last frame's pixels, every view's after
+    /// the one before (premultiplied linear RGBA, row 0 at the top): what
+    /// `--present` shows without reading it back.
+    pub fn image_buffer(&self) -> &wgpu::Buffer {
+        &self.frame.image.buffer
+    }
+
     /// Per-frame buffers and bind groups made so far.
     pub fn frame_buffer_counts(&self) -> FrameBufferCounts {
         self.frame.made
@@ -415,16 +422,7 @@ impl Raycaster {
         settings: &RenderSettings,
     ) -> Result<Rendered> {
         let readback = &self.frame.readback.buffer;
-        let slice = readback.slice(..img_size + fb_size + COUNTERS);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        gpu.wait()?;
-        rx.recv()??;
-        let data = slice
-            .get_mapped_range()
-            .map_err(|e| anyhow::anyhow!("reading back the frame: {e:?}"))?;
+        let data = gpu.map_read(readback.slice(..img_size + fb_size + COUNTERS), "the frame")?;
         let px: &[[f32; 4]] = bytemuck::cast_slice(&data[..img_size as usize]);
         let images = gviews
             .iter()

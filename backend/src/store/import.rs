@@ -198,16 +198,23 @@ pub fn import(
 
 /// Bytes the slice windows and brick batches take at most.
 pub fn memory_needed(layout: &OctreeLayout) -> u64 {
+    // Saturating: a layout past every machine's memory says so, not wraps.
     let window = (layout.brick + 2 * OVERLAP + 1) as u64;
     let slices: u64 = (0..layout.levels)
         .map(|l| {
             let d = layout.level_dims(l);
+            let slice = (d[0] as u64).saturating_mul(d[1] as u64);
             // window of full slices + one pending half-resolution slice
-            (window * (d[0] * d[1]) as u64 + (d[0] * d[1]) as u64 / 4) * 4
+            window
+                .saturating_mul(slice)
+                .saturating_add(slice / 4)
+                .saturating_mul(4)
         })
-        .sum();
-    let batch = BATCH as u64 * layout.stored_len() as u64 * 4 * 2;
-    slices + batch
+        .fold(0u64, u64::saturating_add);
+    let batch = (BATCH as u64)
+        .saturating_mul(layout.stored_len() as u64)
+        .saturating_mul(8);
+    slices.saturating_add(batch)
 }
 
 /// One level's rolling window of slices.

@@ -62,6 +62,9 @@ pub struct ServeOptions {
     /// Told the page's URL once the server listens.
     pub ready: Option<std::sync::mpsc::Sender<String>>,
     pub eye_view: EyeView,
+    /// Show every frame on the display's outputs too, swap-locked
+    /// (`render --present`).
+    pub present: bool,
 }
 
 /// Frames rendered after a change before the loop idles even if the cut has
@@ -155,6 +158,7 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
         out_dir: opts.out.clone(),
         float: false,
         sync_io: opts.sync_io,
+        present: opts.present,
     })?;
     transport.broadcast(&ToBackend::TransferFunction {
         version: 1,
@@ -356,6 +360,9 @@ fn frame_loop(
                 bad.rank,
                 bad.error.as_deref().unwrap_or("")
             );
+        }
+        if opts.present {
+            crate::swap(transport, fs.frame, &mut stats)?;
         }
         notes.report(&stats);
         rendered_version = version;
