@@ -44,7 +44,15 @@ $px render --scene configs/scenes/colin27-wall-clip.toml --frames 6 --sync --out
 $px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16-clip/frame_00005" \
   --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-clip-eyes.png"
 
+# A Looking Glass Portrait: its 48 views interleaved onto the panel's
+# sub-pixels through the lenticular mapping of its calibration.
+$px display-gen --looking-glass configs/displays/looking-glass-portrait/visual.json \
+  --view-size 105x140 -o out/looking-glass
+$px render --scene configs/scenes/colin27-looking-glass.toml --frames 6 --sync --out "$out/looking-glass"
+cp "$out/looking-glass/frame_00005/panel.png" "$out/looking-glass-panel.png"
+
 echo
 echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png, $out/colin27-clip.png,"
-echo "         $out/colin27-mimda.png, $out/colin27-iso.png, $out/wall16-eyes.png and $out/wall16-clip-eyes.png"
+echo "         $out/colin27-mimda.png, $out/colin27-iso.png, $out/wall16-eyes.png, $out/wall16-clip-eyes.png"
+echo "         and $out/looking-glass-panel.png (the panel of a Looking Glass, interleaved for its lenses)"
 echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"
