@@ -417,6 +417,17 @@ fn a_websocket_client_drives_the_desktop_view() {
         let bad = url.replace("token=", "token=x");
         let bad = bad.replace("http://", "ws://").replace("/?", "/ws?");
         assert!(tokio_tungstenite::connect_async(bad).await.is_err());
+        // So is a page of another origin, with the right token; the
+        // server's own origin is let in.
+        let ws_url = url.replace("http://", "ws://").replace("/?", "/ws?");
+        let host = url.trim_start_matches("http://").split('/').next().unwrap().to_string();
+        for (origin, ok) in [("http://evil.example", false), (&*format!("http://{host}"), true)] {
+            use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+            let mut req = ws_url.as_str().into_client_request().unwrap();
+            req.headers_mut().insert("Origin", origin.parse().unwrap());
+            let r = tokio_tungstenite::connect_async(req).await;
+            assert_eq!(r.is_ok(), ok, "Origin {origin}");
+        }
 
         a.send(json!({"type": "quit"})).await;
         a.wait_for("ended").await;
@@ -995,4 +1006,33 @@ fn latency_of_input_to_frame() {
             "latency {name}: input → frame median {l50:.1} ms, p95 {l95:.1} ms ({n} inputs); of which the frame (broadcast to last reply) {r50:.1} ms"
         );
     }
+}
+
+/// A token shorter than 128 bits is refused, from the command line and from
+/// PARALLAX_TOKEN alike; a good one from the environment is the page's.
+#[test]
+fn tokens_are_long_and_may_come_from_the_environment() {
+    let w = World::new([48, 36]);
+    let scene = w.path("wall-scene.toml");
+    for (args, env) in [
+        (vec!["--token", "a"], vec![]),
+        (vec![], vec![("PARALLAX_TOKEN", "abc123")]),
+    ] {
+        let o = Command::new(bin())
+            .args(["serve", "--scene", s(&scene), "--bind", "127.0.0.1:0"])
+            .args(&args)
+            .envs(env)
+            .output()
+            .unwrap();
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("expected at least 22 letters and digits (128 bits)"),
+            "{err}"
+        );
+    }
+    let token = "Tok3nFromTheEnvironment0123";
+    let (_child, url, _) =
+        spawn_serve(&["--scene", s(&scene)], &[("PARALLAX_TOKEN", token)], false);
+    assert!(url.ends_with(&format!("?token={token}")), "{url}");
 }

@@ -16,8 +16,10 @@ pub struct Args {
     /// address exposes the page to the network (the token guards it).
     #[arg(long, default_value = "127.0.0.1:8080")]
     bind: std::net::SocketAddr,
-    /// The access token (default: a random one, printed in the URL).
-    #[arg(long)]
+    /// The access token: at least 22 letters and digits (128 bits; default:
+    /// a random one, printed in the URL). Also read from PARALLAX_TOKEN,
+    /// which, unlike the command line, other users cannot see in `ps`.
+    #[arg(long, env = "PARALLAX_TOKEN", hide_env_values = true)]
     token: Option<String>,
     /// Also write every frame's images and stats here, as `render` does.
     #[arg(long)]

@@ -171,8 +171,11 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
     let hello = state::hello(&opts.scene, &scene, &display, &tf, &opts.record_dir).to_string();
     let state = LiveState::from_scene(&scene, &display, tf);
     let token = match &opts.token {
-        Some(t) if t.is_empty() || !t.chars().all(|c| c.is_ascii_alphanumeric()) => {
-            anyhow::bail!("--token: expected letters and digits")
+        Some(t) if t.len() < MIN_TOKEN || !t.chars().all(|c| c.is_ascii_alphanumeric()) => {
+            anyhow::bail!(
+                "--token (or PARALLAX_TOKEN): expected at least {MIN_TOKEN} letters and digits (128 bits), got {} characters",
+                t.len()
+            )
         }
         Some(t) => t.clone(),
         None => random_token()?,
@@ -450,6 +453,10 @@ fn encode_png(w: u32, h: u32, rgb: &[u8]) -> Result<Vec<u8>> {
     Ok(out)
 }
 
+/// The shortest token taken: 22 letters and digits hold 62^22 > 2^128
+/// choices.
+const MIN_TOKEN: usize = 22;
+
 fn random_token() -> Result<String> {
     use std::io::Read;
     let mut b = [0u8; 16];
@@ -466,7 +473,30 @@ struct AppState {
 }
 
 fn authorised(app: &AppState, q: &HashMap<String, String>) -> bool {
-    q.get("token").is_some_and(|t| t == &app.shared.token)
+    q.get("token")
+        .is_some_and(|t| same(t.as_bytes(), app.shared.token.as_bytes()))
+}
+
+/// Equal, in a time that does not depend on where the two first differ
+/// (a token guessed byte by byte learns nothing from the answer's time).
+fn same(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |d, (x, y)| d | (x ^ y)) == 0
+}
+
+/// A browser's WebSocket from another site carries that site's `Origin`:
+/// only the page this server served (same host and port) may open `/ws`.
+/// Clients that are not browsers send no `Origin`.
+fn same_origin(headers: &axum::http::HeaderMap) -> bool {
+    let Some(origin) = headers.get(axum::http::header::ORIGIN) else {
+        return true;
+    };
+    let host = headers
+        .get(axum::http::header::HOST)
+        .and_then(|h| h.to_str().ok());
+    match (origin.to_str().ok(), host) {
+        (Some(o), Some(h)) => o == format!("http://{h}") || o == format!("https://{h}"),
+        _ => false,
+    }
 }
 
 async fn page(State(app): State<AppState>, Query(q): Query<HashMap<String, String>>) -> Response {
@@ -483,10 +513,14 @@ async fn page(State(app): State<AppState>, Query(q): Query<HashMap<String, Strin
 async fn ws_upgrade(
     State(app): State<AppState>,
     Query(q): Query<HashMap<String, String>>,
+    headers: axum::http::HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Response {
     if !authorised(&app, &q) {
         return (StatusCode::FORBIDDEN, "parallax: wrong or missing token").into_response();
+    }
+    if !same_origin(&headers) {
+        return (StatusCode::FORBIDDEN, "parallax: a page of another origin").into_response();
     }
     ws.on_upgrade(move |socket| client(socket, app))
 }
