@@ -417,6 +417,24 @@ fn a_websocket_client_drives_the_desktop_view() {
         let bad = url.replace("token=", "token=x");
         let bad = bad.replace("http://", "ws://").replace("/?", "/ws?");
         assert!(tokio_tungstenite::connect_async(bad).await.is_err());
+        // A message over 1 MiB closes its socket; the others go on.
+        {
+            let mut big = Client::connect(&url).await;
+            let text = format!("{{\"type\": \"set\", \"pad\": \"{}\"}}", "x".repeat(2 << 20));
+            let _ = big.ws.send(Message::Text(text.into())).await;
+            let closed = tokio::time::timeout(WAIT, async {
+                loop {
+                    match big.ws.next().await {
+                        None | Some(Err(_)) | Some(Ok(Message::Close(_))) => break,
+                        Some(Ok(_)) => {}
+                    }
+                }
+            })
+            .await;
+            assert!(closed.is_ok(), "the oversize message's socket stayed open");
+        }
+        let v = a.change(json!({"type": "set", "eta": 0.5})).await;
+        a.settled(v).await;
         // So is a page of another origin, with the right token; the
         // server's own origin is let in.
         let ws_url = url.replace("http://", "ws://").replace("/?", "/ws?");

@@ -453,6 +453,12 @@ fn encode_png(w: u32, h: u32, rgb: &[u8]) -> Result<Vec<u8>> {
     Ok(out)
 }
 
+/// Pages connected at once, at most.
+const MAX_CLIENTS: usize = 64;
+
+/// The largest message a page may send (bytes).
+const MAX_MESSAGE: usize = 1 << 20;
+
 /// The shortest token taken: 22 letters and digits hold 62^22 > 2^128
 /// choices.
 const MIN_TOKEN: usize = 22;
@@ -522,7 +528,19 @@ async fn ws_upgrade(
     if !same_origin(&headers) {
         return (StatusCode::FORBIDDEN, "parallax: a page of another origin").into_response();
     }
-    ws.on_upgrade(move |socket| client(socket, app))
+    use std::sync::atomic::Ordering;
+    if app.shared.clients.load(Ordering::SeqCst) >= MAX_CLIENTS {
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!("parallax: {MAX_CLIENTS} pages are connected already"),
+        )
+            .into_response();
+    }
+    // A message is a few hundred bytes (a transfer function of 256 points
+    // a few kB): larger ones close the socket before they are read whole.
+    ws.max_message_size(MAX_MESSAGE)
+        .max_frame_size(MAX_MESSAGE)
+        .on_upgrade(move |socket| client(socket, app))
 }
 
 /// One client: its messages change the shared state; it gets every state
