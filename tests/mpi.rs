@@ -609,3 +609,43 @@ fn frame_reconstruction_in_the_cluster() {
         );
     }
 }
+
+/// Ranks agree before the first frame: a back end that says it speaks
+/// another protocol, or reads another database (`PARALLAX_FAULT`
+/// `protocol:2:0`, `database:2:0`, as another build or another copy of the
+/// file would), ends the run at set-up, named, with no frame rendered.
+#[test]
+fn ranks_that_disagree_stop_the_run_before_the_first_frame() {
+    let w = World::new();
+    let scene = w.path("scene.toml");
+    for (fault, want) in [
+        ("protocol:2:0", "back end 2 runs protocol 3 of parallax"),
+        (
+            "database:2:0",
+            "back end 2 reads another database than back end 1",
+        ),
+    ] {
+        let out = w.path(&format!("out-{}", &fault[..8]));
+        let t = std::time::Instant::now();
+        let o = mpirun(
+            3,
+            &w.render_args(&out, &scene),
+            &[("PARALLAX_FAULT", fault)],
+        );
+        assert!(!o.status.success(), "{fault}: {}", text(&o));
+        assert!(
+            text(&o).contains(want),
+            "{fault}: wanted '{want}' in:\n{}",
+            text(&o)
+        );
+        assert!(
+            !out.join("frame_00000").exists(),
+            "{fault}: a frame was rendered"
+        );
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "{fault}: took {:?}",
+            t.elapsed()
+        );
+    }
+}

@@ -9,7 +9,9 @@ use anyhow::{Context, Result};
 use parallax_common::camera::View;
 use parallax_common::config::Display;
 use parallax_common::paths::file_in;
-use parallax_common::protocol::{FrameState, FrameStats, Link, Malformed, StreamImage, ToBackend};
+use parallax_common::protocol::{
+    FrameState, FrameStats, Link, Malformed, Ready, StreamImage, ToBackend, BUILD, PROTOCOL_VERSION,
+};
 use std::cell::Cell;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
@@ -86,7 +88,7 @@ pub fn serve(link: &mut dyn Link, backends: usize) -> Result<()> {
         if let Some(e) = &failed {
             match msg {
                 ToBackend::Quit => return Err(failed.take().unwrap()),
-                ToBackend::Frame(_) | ToBackend::Present { .. } => {
+                ToBackend::Setup { .. } | ToBackend::Frame(_) | ToBackend::Present { .. } => {
                     link.reply(&error_stats(link.rank(), e))?
                 }
                 _ => {}
@@ -94,7 +96,10 @@ pub fn serve(link: &mut dyn Link, backends: usize) -> Result<()> {
             continue;
         }
         // The front end waits for an answer to these.
-        let frame = matches!(msg, ToBackend::Frame(_) | ToBackend::Present { .. });
+        let frame = matches!(
+            msg,
+            ToBackend::Setup { .. } | ToBackend::Frame(_) | ToBackend::Present { .. }
+        );
         match catch_panic(|| handle(link, backends, &mut setup, msg)) {
             Ok(true) => return Ok(()),
             Ok(false) => {}
@@ -176,6 +181,13 @@ fn handle(
             } else {
                 None
             };
+            let mut ready = Ready {
+                protocol: PROTOCOL_VERSION,
+                build: BUILD.to_string(),
+                database: renderer.db().identity(),
+            };
+            setup_fault(link.rank(), &mut ready);
+            let rank = link.rank();
             *setup = Some(Setup {
                 display,
                 mine,
@@ -188,6 +200,11 @@ fn handle(
                 interleaver: None,
                 renderer,
             });
+            link.reply(&FrameStats {
+                rank,
+                ready: Some(ready),
+                ..Default::default()
+            })?;
         }
         ToBackend::TransferFunction { version, tf } => {
             let s = setup.as_mut().context("transfer function before setup")?;
@@ -364,6 +381,24 @@ fn looking_glass_panel(
 /// failure ends the run with an error naming the rank instead of hanging:
 /// `exit` dies without a word (a crashed node), `panic` panics inside the
 /// frame (a bug), `stop` stops the process with SIGSTOP (a node that hangs).
+/// `PARALLAX_FAULT=protocol:<rank>:0` or `database:<rank>:0`: back end
+/// `<rank>` says it speaks another protocol, or renders another database,
+/// as a rank of another build or with another file would.
+fn setup_fault(rank: u32, ready: &mut Ready) {
+    let Ok(spec) = std::env::var("PARALLAX_FAULT") else {
+        return;
+    };
+    let parts: Vec<&str> = spec.split(':').collect();
+    if parts.len() != 3 || parts[1].parse() != Ok(rank) {
+        return;
+    }
+    match parts[0] {
+        "protocol" => ready.protocol += 1,
+        "database" => ready.database ^= 1,
+        _ => {}
+    }
+}
+
 fn fault_injection(rank: u32, frame: u64) {
     let Ok(spec) = std::env::var("PARALLAX_FAULT") else {
         return;

@@ -56,6 +56,8 @@ pub struct StreamImage {
 /// Large state, sent once and again only when it changes.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum ToBackend {
+    /// Every back end answers with a [`FrameStats`] holding its [`Ready`]
+    /// (or its error).
     Setup {
         scene: Scene,
         display: Display,
@@ -89,6 +91,23 @@ pub enum ToBackend {
         frame: u64,
     },
     Quit,
+}
+
+/// The version of these messages: a rank that speaks another is named
+/// before the first frame.
+pub const PROTOCOL_VERSION: u32 = 2;
+
+/// This build: the workspace's version and the commit it was built from.
+pub const BUILD: &str = concat!(env!("CARGO_PKG_VERSION"), " ", env!("PARALLAX_BUILD"));
+
+/// A back end's answer to `Setup`: what it runs and what it renders, for
+/// the coordinator to check that every rank agrees.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Ready {
+    pub protocol: u32,
+    pub build: String,
+    /// The database's identity (header and node-table checksums).
+    pub database: u64,
 }
 
 /// What a back end reports after each frame.
@@ -171,6 +190,9 @@ pub struct FrameStats {
     /// read back (as a calibration or a Looking Glass panel needs).
     #[serde(default)]
     pub present_direct: bool,
+    /// The answer to `Setup` (only then).
+    #[serde(default)]
+    pub ready: Option<Ready>,
 }
 
 /// A limit that stopped refinement short of adequate, which the user can

@@ -128,14 +128,17 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
     // coordinator's own figures per frame.
     let mut stats_file = create("stats.jsonl")?;
     let mut frontend_file = create("frontend.jsonl")?;
-    transport.broadcast(&ToBackend::Setup {
-        scene: scene.clone(),
-        display: display.clone(),
-        out_dir: opts.out.clone(),
-        float: opts.float,
-        sync_io: opts.sync_io,
-        present: opts.present.is_some(),
-    })?;
+    setup(
+        transport,
+        &ToBackend::Setup {
+            scene: scene.clone(),
+            display: display.clone(),
+            out_dir: opts.out.clone(),
+            float: opts.float,
+            sync_io: opts.sync_io,
+            present: opts.present.is_some(),
+        },
+    )?;
     transport.broadcast(&ToBackend::TransferFunction { version: 1, tf })?;
     transport.broadcast(&ToBackend::Tools {
         version: 1,
@@ -186,6 +189,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
                 bad.error.as_deref().unwrap_or("")
             );
         }
+        answers(&stats, frame)?;
         if opts.present.is_some() {
             let spread = swap(transport, frame, &mut stats)?;
             summary.present_spread_ms.push(spread);
@@ -344,6 +348,64 @@ impl RunSummary {
     }
 }
 
+/// Sends the session's set-up and waits until every back end has taken it.
+/// Each answers with what it runs (protocol, build) and renders (its
+/// database's identity): a back end that failed, or that differs from the
+/// coordinator, or whose database differs from the first back end's, is
+/// named before the first frame.
+pub(crate) fn setup(transport: &mut dyn Transport, msg: &ToBackend) -> Result<()> {
+    use parallax_common::protocol::{BUILD, PROTOCOL_VERSION};
+    transport.broadcast(msg)?;
+    let replies = transport.gather()?;
+    if let Some(bad) = replies.iter().find(|s| s.error.is_some()) {
+        bail!(
+            "back end {} failed to set up: {}",
+            bad.rank,
+            bad.error.as_deref().unwrap_or("")
+        );
+    }
+    let mut first: Option<(u32, u64)> = None;
+    for r in &replies {
+        let Some(ready) = &r.ready else {
+            bail!(
+                "back end {} answered the set-up without saying what it runs (another build?)",
+                r.rank
+            );
+        };
+        if ready.protocol != PROTOCOL_VERSION || ready.build != BUILD {
+            bail!(
+                "back end {} runs protocol {} of parallax {}, the coordinator protocol {PROTOCOL_VERSION} of parallax {BUILD}: run one build on every rank",
+                r.rank,
+                ready.protocol,
+                ready.build
+            );
+        }
+        match first {
+            None => first = Some((r.rank, ready.database)),
+            Some((k, d)) if d != ready.database => bail!(
+                "back end {} reads another database than back end {k} (identity {:016x} against {d:016x}): every rank must read the same .pxo",
+                r.rank,
+                ready.database
+            ),
+            Some(_) => {}
+        }
+    }
+    Ok(())
+}
+
+/// Every reply answers `frame` (a reply for another frame is a rank out of
+/// step, named).
+pub(crate) fn answers(replies: &[FrameStats], frame: u64) -> Result<()> {
+    match replies.iter().find(|s| s.frame != frame) {
+        Some(r) => bail!(
+            "back end {} answered frame {} when asked for frame {frame}",
+            r.rank,
+            r.frame
+        ),
+        None => Ok(()),
+    }
+}
+
 /// The swap lock (G10 §5): every back end has rendered `frame` (its stats
 /// are in); tell them all to present it, gather when each did, and put
 /// those times into the frame's stats. Returns the spread across back ends
@@ -362,6 +424,7 @@ pub(crate) fn swap(
             bad.error.as_deref().unwrap_or("")
         );
     }
+    answers(&shown, frame)?;
     for s in stats.iter_mut() {
         if let Some(p) = shown.iter().find(|p| p.rank == s.rank) {
             s.present_us = p.present_us;

@@ -28,6 +28,9 @@ pub struct OctreeDb {
     pub nodes: Vec<NodeRecord>,
     pub summary: Summary,
     index: HashMap<NodeKey, usize>,
+    /// The header's and the node table's checksums: which database this is
+    /// (the node table holds every brick's checksum).
+    identity: u64,
 }
 
 impl OctreeDb {
@@ -174,7 +177,14 @@ impl OctreeDb {
             nodes: trailer.nodes,
             summary: trailer.summary,
             index,
+            identity: (head_crc as u64) << 32 | footer.trailer_crc as u64,
         })
+    }
+
+    /// Which database this is: equal for two copies of one file, different
+    /// (but for a 2^-64 chance) for two files.
+    pub fn identity(&self) -> u64 {
+        self.identity
     }
 
     pub fn path(&self) -> &Path {

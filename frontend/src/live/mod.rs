@@ -152,14 +152,17 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
     let display = crate::load_display(&scene, opts.display.as_ref())?;
     display.assignment(transport.backends())?;
     let tf = TransferFunction::load(&scene.transfer_function)?;
-    transport.broadcast(&ToBackend::Setup {
-        scene: scene.clone(),
-        display: display.clone(),
-        out_dir: opts.out.clone(),
-        float: false,
-        sync_io: opts.sync_io,
-        present: opts.present,
-    })?;
+    crate::setup(
+        transport,
+        &ToBackend::Setup {
+            scene: scene.clone(),
+            display: display.clone(),
+            out_dir: opts.out.clone(),
+            float: false,
+            sync_io: opts.sync_io,
+            present: opts.present,
+        },
+    )?;
     transport.broadcast(&ToBackend::TransferFunction {
         version: 1,
         tf: tf.clone(),
@@ -364,6 +367,7 @@ fn frame_loop(
                 bad.error.as_deref().unwrap_or("")
             );
         }
+        crate::answers(&stats, fs.frame)?;
         if opts.present {
             crate::swap(transport, fs.frame, &mut stats)?;
         }
