@@ -412,6 +412,44 @@ fn a_websocket_client_drives_the_desktop_view() {
         a.send(json!({"type": "state", "state": linked})).await;
         let e = a.error().await;
         assert!(e.contains("tools"), "{e}");
+        // A state obeys every limit the single-field messages do, and a
+        // refused one changes nothing.
+        let before = a.state.clone();
+        let mut many = before.clone();
+        let point = many["tf"]["point"][0].clone();
+        many["tf"]["point"] = json!((0..5000)
+            .map(|i| {
+                let mut p = point.clone();
+                p["value"] = json!(i as f64 / 10.0);
+                p
+            })
+            .collect::<Vec<_>>());
+        let mut far_tool = before.clone();
+        far_tool["tools"][0]["point"] = json!([1000.0, 0.0, 0.0]);
+        let mut far_centre = before.clone();
+        far_centre["placement"]["center"] = json!([0.0, 0.0, 11.0]);
+        for (bad, want) in [
+            (many, "state.tf: 5000 points (2 to 256)"),
+            (far_tool, "state.tools 0.point: 1000 is outside"),
+            (far_centre, "state.placement.center: 11 is outside"),
+        ] {
+            a.send(json!({"type": "state", "state": bad})).await;
+            let e = a.error().await;
+            assert!(e.contains(want), "wanted '{want}': {e}");
+            assert_eq!(a.state, before);
+        }
+        // Panning far stops at the limit, and that state applies again
+        // from its link.
+        let v = a.change(json!({"type": "pan", "dx": 10.0, "dy": -10.0})).await;
+        assert_eq!(a.state["placement"]["center"][0], json!(10.0));
+        a.settled(v).await;
+        let far = a.state.clone();
+        let v = a.change(json!({"type": "pan", "dx": -10.0, "dy": 10.0})).await;
+        assert_ne!(a.state, far);
+        a.settled(v).await;
+        let v = a.change(json!({"type": "state", "state": far})).await;
+        assert_eq!(a.state, far);
+        a.settled(v).await;
 
         // A wrong token is refused.
         let bad = url.replace("token=", "token=x");

@@ -30,10 +30,16 @@ struct Xvfb {
     child: Child,
     display: String,
     fb: tempfile::TempDir,
+    _one: std::sync::MutexGuard<'static, ()>,
 }
+
+/// One X server at a time: the tests' servers, runs and captures share
+/// two cores, and each test's timing assumes the machine to itself.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 impl Xvfb {
     fn start(w: u32, h: u32) -> Xvfb {
+        let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
         let fb = tempfile::tempdir().unwrap();
         let mut child = Command::new("Xvfb")
             .args(["-displayfd", "1", "-screen", "0"])
@@ -49,7 +55,12 @@ impl Xvfb {
             .unwrap();
         let display = format!(":{}", line.trim());
         assert!(line.trim().parse::<u32>().is_ok(), "Xvfb said '{line}'");
-        Xvfb { child, display, fb }
+        Xvfb {
+            child,
+            display,
+            fb,
+            _one: guard,
+        }
     }
 
     /// The screen now: width, height and 8-bit RGB.
@@ -362,12 +373,15 @@ fn a_rank_that_cannot_open_its_window_ends_the_run_naming_it() {
     let x = Xvfb::start(640, 400);
     let cases: [(&str, Option<&str>, &[&str]); 2] = [
         // No X display at all: every back end fails; the first is named.
-        ("", None, &["rank 1: --present: no X display to present on (DISPLAY is not set)"]),
+        ("", None, &["back end 1 failed to set up: --present: no X display to present on (DISPLAY is not set)"]),
         // An output the X screen does not have (back end 2's).
         (
             "[present]\n[[present.output]]\nrect = [0, 0, 640, 90]\nprojectors = [\"p00\", \"p01\", \"p02\", \"p03\"]\n[[present.output]]\nname = \"DP-9\"\nprojectors = [\"p08\"]\n",
             Some(&x.display),
-            &["rank 2: --present: output 'DP-9'", "no output 'DP-9' (its outputs: screen)"],
+            &[
+                "back end 2 failed to set up: --present: output 'DP-9'",
+                "no output 'DP-9' (its outputs: screen)",
+            ],
         ),
     ];
     for (present_section, display, want) in cases {

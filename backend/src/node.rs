@@ -172,12 +172,7 @@ fn handle(
                 })
                 .collect::<Result<Vec<_>>>()?;
             let presenter = if present {
-                Some(Presenter::open(
-                    renderer.gpu(),
-                    &display,
-                    &mine,
-                    link.rank(),
-                )?)
+                Some(Presenter::open(renderer.gpu(), &display, &mine)?)
             } else {
                 None
             };

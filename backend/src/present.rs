@@ -46,6 +46,22 @@ pub struct Presenter {
     conn: XCBConnection,
 }
 
+/// A connection to `$DISPLAY`, tried for up to a second: a server that
+/// has just started (or is busy) may refuse the first attempts.
+fn connect() -> Result<(XCBConnection, usize)> {
+    let mut tries = 0;
+    loop {
+        match XCBConnection::connect(None) {
+            Ok(c) => return Ok(c),
+            Err(e) if tries >= 10 => return Err(e.into()),
+            Err(_) => {
+                tries += 1;
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
+        }
+    }
+}
+
 /// The X display a back end would present on, for messages.
 fn display_name() -> String {
     std::env::var("DISPLAY").unwrap_or_default()
@@ -54,9 +70,11 @@ fn display_name() -> String {
 impl Presenter {
     /// Opens the windows of the outputs that show this back end's
     /// projectors (`mine`: projector indices, in the order of its images).
-    /// Errors name the rank, the output and the reason.
-    pub fn open(gpu: &Gpu, display: &Display, mine: &[usize], rank: u32) -> Result<Self> {
-        let who = format!("rank {rank}: --present");
+    /// Errors name the output and the reason (the coordinator adds the
+    /// rank).
+    pub fn open(gpu: &Gpu, display: &Display, mine: &[usize]) -> Result<Self> {
+        // The coordinator names the rank ("back end N failed to set up").
+        let who = "--present";
         let x = display_name();
         if x.is_empty() {
             bail!("{who}: no X display to present on (DISPLAY is not set)");
@@ -80,8 +98,8 @@ impl Presenter {
             }],
             None => display.windows("display")?,
         };
-        let (conn, screen_num) = XCBConnection::connect(None)
-            .with_context(|| format!("{who}: cannot open the X display '{x}'"))?;
+        let (conn, screen_num) =
+            connect().with_context(|| format!("{who}: cannot open the X display '{x}'"))?;
         let root = conn.setup().roots[screen_num].clone();
         let mut res: Vec<[u32; 2]> = display.projectors.iter().map(|p| p.resolution).collect();
         // The panel stands as one more "projector", shown by this back end.

@@ -428,7 +428,8 @@ fn focus(shared: &Shared, picked: Option<[f64; 3]>) {
         return;
     };
     let mut live = shared.live.lock().unwrap();
-    live.state.placement.center[2] -= p[2];
+    let z = &mut live.state.placement.center[2];
+    *z = (*z - p[2]).clamp(-state::CENTER_LIMIT, state::CENTER_LIMIT);
     live.version += 1;
     shared
         .state_tx

@@ -90,6 +90,14 @@ pub enum ClientMsg {
     Quit,
 }
 
+/// How far the volume's centre may be from the screen's (m, per axis):
+/// pan and focus stop there, and a state is refused beyond it, so every
+/// state the server sends can be applied again from its link.
+pub const CENTER_LIMIT: f64 = 10.0;
+
+/// Transfer-function points a page may send, in a `tf` or a `state`.
+const MAX_TF_POINTS: usize = 256;
+
 /// `v` if it is finite and within [lo, hi]; otherwise an error naming it.
 fn within(name: &str, v: f64, lo: f64, hi: f64) -> Result<f64> {
     ensure!(
@@ -104,6 +112,25 @@ fn within3(name: &str, v: [f64; 3], lo: f64, hi: f64) -> Result<[f64; 3]> {
         within(name, c, lo, hi)?;
     }
     Ok(v)
+}
+
+/// The bounds a tool's pose keeps, whichever message sets it.
+fn tool_bounds(tool: &Tool, what: &str) -> Result<()> {
+    let Tool::ClipPlane(c) = tool else {
+        return Ok(());
+    };
+    within3(
+        &format!("{what}.point"),
+        c.point,
+        -CENTER_LIMIT,
+        CENTER_LIMIT,
+    )?;
+    within3(&format!("{what}.normal"), c.normal, -1e3, 1e3)?;
+    within(&format!("{what}.thickness"), c.thickness, 0.0, 10.0)?;
+    for x in c.context {
+        within(&format!("{what}.context"), x, -10.0, 10.0)?;
+    }
+    Ok(())
 }
 
 /// The outputs a display offers: the desktop window, or each projector and
@@ -180,8 +207,9 @@ impl LiveState {
             ClientMsg::Pan { dx, dy } => {
                 let dx = within("pan.dx", dx, -10.0, 10.0)?;
                 let dy = within("pan.dy", dy, -10.0, 10.0)?;
-                self.placement.center[0] += dx;
-                self.placement.center[1] += dy;
+                let c = &mut self.placement.center;
+                c[0] = (c[0] + dx).clamp(-CENTER_LIMIT, CENTER_LIMIT);
+                c[1] = (c[1] + dy).clamp(-CENTER_LIMIT, CENTER_LIMIT);
             }
             ClientMsg::Set {
                 eta,
@@ -233,8 +261,8 @@ impl LiveState {
     /// A new transfer function from the page's control points.
     fn set_tf(&mut self, point: Vec<PointMsg>) -> Result<()> {
         ensure!(
-            (2..=256).contains(&point.len()),
-            "tf.point: {} points (2 to 256)",
+            (2..=MAX_TF_POINTS).contains(&point.len()),
+            "tf.point: {} points (2 to {MAX_TF_POINTS})",
             point.len()
         );
         let pts = point
@@ -272,20 +300,18 @@ impl LiveState {
             bail!("tool {index}: this kind of tool has no pose");
         };
         if let Some(p) = point {
-            c.point = within3("tool.point", p, -10.0, 10.0)?;
+            c.point = p;
         }
         if let Some(v) = normal {
-            c.normal = within3("tool.normal", v, -1e3, 1e3)?;
+            c.normal = v;
         }
         if let Some(t) = thickness {
-            c.thickness = within("tool.thickness", t, 0.0, 10.0)?;
+            c.thickness = t;
         }
         if let Some(x) = context {
-            c.context = [
-                within("tool.context", x[0], -10.0, 10.0)?,
-                within("tool.context", x[1], -10.0, 10.0)?,
-            ];
+            c.context = x;
         }
+        tool_bounds(tool, "tool")?;
         tool.check(&format!("tool {index}"))?;
         Ok(())
     }
@@ -295,7 +321,12 @@ impl LiveState {
     fn set_state(&mut self, s: LiveState, display: &Display) -> Result<()> {
         let mut next = self.clone();
         next.placement = s.placement;
-        within3("state.placement.center", s.placement.center, -10.0, 10.0)?;
+        within3(
+            "state.placement.center",
+            s.placement.center,
+            -CENTER_LIMIT,
+            CENTER_LIMIT,
+        )?;
         within3(
             "state.placement.rotation_deg",
             s.placement.rotation_deg,
@@ -312,7 +343,12 @@ impl LiveState {
             },
             display,
         )?;
-        next.tf = s.tf;
+        let n = s.tf.points().len();
+        ensure!(
+            (2..=MAX_TF_POINTS).contains(&n),
+            "state.tf: {n} points (2 to {MAX_TF_POINTS})"
+        );
+        next.tf = TransferFunction::from_points(s.tf.points().to_vec()).context("state.tf")?;
         ensure!(
             s.tools.len() == self.tools.len()
                 && s.tools
@@ -322,6 +358,7 @@ impl LiveState {
             "state.tools: not this scene's tools"
         );
         for (i, t) in s.tools.iter().enumerate() {
+            tool_bounds(t, &format!("state.tools {i}"))?;
             t.check(&format!("state.tools {i}"))?;
         }
         next.tools = s.tools;
