@@ -45,9 +45,9 @@ $px simulate --display configs/displays/wall16/display.toml --frames "$out/wall1
   --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-clip-eyes.png"
 
 # A Looking Glass Portrait: its 48 views interleaved onto the panel's
-# sub-pixels through the lenticular mapping of its calibration.
-$px display-gen --looking-glass configs/displays/looking-glass-portrait/visual.json \
-  --view-size 105x140 -o out/looking-glass
+# sub-pixels through the lenticular mapping of its calibration (the display
+# in configs/displays/looking-glass-portrait/ was made from its visual.json
+# by `parallax display-gen --looking-glass`).
 $px render --scene configs/scenes/colin27-looking-glass.toml --frames 6 --sync --out "$out/looking-glass"
 cp "$out/looking-glass/frame_00005/panel.png" "$out/looking-glass-panel.png"
 
