@@ -4,7 +4,7 @@
 //! screen, equal to its PNG, with the swap lock's spread in the stats; a
 //! rank that cannot open its window ends the run at once, naming itself.
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -182,6 +182,35 @@ fn present(dir: &Path, out: &Path, display: Option<&str>, extra: &[&str]) -> Com
     c
 }
 
+/// Waits until `n` back-end stats of the run are in `out` (a frame's are
+/// written after its present) and the X server has had a moment to show
+/// it; panics with the run's output if the run ends or stalls first.
+fn on_screen(out: &Path, n: usize, run: &mut Child) {
+    let start = Instant::now();
+    while stats(out).len() < n {
+        if start.elapsed() > Duration::from_secs(90) || run.try_wait().unwrap().is_some() {
+            let _ = run.kill();
+            let mut said = String::new();
+            for pipe in [
+                run.stdout
+                    .take()
+                    .map(|p| Box::new(p) as Box<dyn std::io::Read>),
+                run.stderr
+                    .take()
+                    .map(|p| Box::new(p) as Box<dyn std::io::Read>),
+            ]
+            .into_iter()
+            .flatten()
+            {
+                let _ = BufReader::new(pipe).read_to_string(&mut said);
+            }
+            panic!("the run ended or stalled before its last frame: {said}");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+}
+
 /// The stats of every back end, one JSON object a line.
 fn stats(out: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(out.join("stats.jsonl"))
@@ -212,16 +241,7 @@ fn the_wall_on_one_x_screen_shows_every_projector_equal_to_its_png() {
         .unwrap();
         // The last frame is on the screen once both back ends' stats of
         // it are written (they are written after its present).
-        let start = Instant::now();
-        while stats(&out).len() < 2 * frames as usize {
-            assert!(
-                start.elapsed() < Duration::from_secs(90) && run.try_wait().unwrap().is_none(),
-                "the run ended or stalled before its last frame: {}",
-                text(&run.wait_with_output().unwrap())
-            );
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        std::thread::sleep(Duration::from_millis(500));
+        on_screen(&out, 2 * frames as usize, &mut run);
         let (sw, _, screen) = x.screen();
         let last = out.join(format!("frame_{:05}", frames - 1));
         let mut worst = 0u8;
@@ -330,16 +350,7 @@ fn outputs_by_name_and_rect_place_projectors_side_by_side() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let start = Instant::now();
-    while stats(&out).len() < 2 {
-        assert!(
-            start.elapsed() < Duration::from_secs(90) && run.try_wait().unwrap().is_none(),
-            "{}",
-            text(&run.wait_with_output().unwrap())
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    std::thread::sleep(Duration::from_millis(500));
+    on_screen(&out, 2, &mut run);
     let (sw, _, screen) = x.screen();
     let mut worst = 0u8;
     for p in 0..16usize {
@@ -478,16 +489,7 @@ fn a_looking_glass_display_writes_its_interleaved_panel() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let start = Instant::now();
-    while stats(&shown).len() < 3 {
-        assert!(
-            start.elapsed() < Duration::from_secs(90) && run.try_wait().unwrap().is_none(),
-            "{}",
-            text(&run.wait_with_output().unwrap())
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    std::thread::sleep(Duration::from_millis(500));
+    on_screen(&shown, 3, &mut run);
     let (_, _, screen) = x.screen();
     let (_, _, panel) = read_png(&shown.join("frame_00002/panel.png"));
     let worst = screen
