@@ -6,6 +6,8 @@
 //! file, the imported warp reproduces the file's, and the rendered image
 //! of that projector is its uncalibrated image through that warp and blend.
 
+mod support;
+
 use parallax_backend::calibrate::Calibrated;
 use parallax_common::config::Display;
 use std::path::Path;
@@ -77,27 +79,7 @@ with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
 fn an_mpcdi_region_imports_and_its_warp_and_blend_shape_the_projectors_image() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    run(&[
-        "synth",
-        "shells",
-        "--size",
-        "40",
-        "-o",
-        s(&d.join("v.nrrd")),
-    ]);
-    run(&[
-        "import",
-        s(&d.join("v.nrrd")),
-        "-o",
-        s(&d.join("v.pxo")),
-        "--brick",
-        "16",
-    ]);
-    std::fs::write(
-        d.join("tf.toml"),
-        "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 100\ncolor = [0.2, 0.5, 1]\nextinction = 0.05\n[[point]]\nvalue = 255\ncolor = [1, 0.8, 0.4]\nextinction = 0.4\n",
-    )
-    .unwrap();
+    support::volume(d, "shells", 40);
     run(&[
         "display-gen",
         "--projectors",

@@ -43,27 +43,7 @@ impl World {
     fn new(desktop: [u32; 2]) -> World {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
-        run(&[
-            "synth",
-            "shepp-logan",
-            "--size",
-            "48",
-            "-o",
-            s(&d.join("v.nrrd")),
-        ]);
-        run(&[
-            "import",
-            s(&d.join("v.nrrd")),
-            "-o",
-            s(&d.join("v.pxo")),
-            "--brick",
-            "16",
-        ]);
-        std::fs::write(
-            d.join("tf.toml"),
-            "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 100\ncolor = [0.2, 0.5, 1]\nextinction = 0.05\n[[point]]\nvalue = 255\ncolor = [1, 0.8, 0.4]\nextinction = 0.4\n",
-        )
-        .unwrap();
+        support::volume(d, "shepp-logan", 48);
         std::fs::create_dir_all(d.join("desktop")).unwrap();
         std::fs::write(
             d.join("desktop.toml"),

@@ -4,6 +4,8 @@
 //! screen, equal to its PNG, with the swap lock's spread in the stats; a
 //! rank that cannot open its window ends the run at once, naming itself.
 
+mod support;
+
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
@@ -119,31 +121,7 @@ fn read_png(p: &Path) -> (usize, usize, Vec<[u8; 3]>) {
 fn world(present: &str) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let run = |args: &[&str]| {
-        let o = Command::new(bin()).args(args).output().unwrap();
-        assert!(o.status.success(), "{}", text(&o));
-    };
-    run(&[
-        "synth",
-        "shells",
-        "--size",
-        "48",
-        "-o",
-        s(&d.join("v.nrrd")),
-    ]);
-    run(&[
-        "import",
-        s(&d.join("v.nrrd")),
-        "-o",
-        s(&d.join("v.pxo")),
-        "--brick",
-        "16",
-    ]);
-    std::fs::write(
-        d.join("tf.toml"),
-        "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 100\ncolor = [0.2, 0.5, 1]\nextinction = 0.05\n[[point]]\nvalue = 255\ncolor = [1, 0.8, 0.4]\nextinction = 0.4\n",
-    )
-    .unwrap();
+    support::volume(d, "shells", 48);
     let wall = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/displays/wall16");
     let display = std::fs::read_to_string(wall.join("display.toml")).unwrap();
     std::fs::write(d.join("display.toml"), format!("{display}\n{present}")).unwrap();
@@ -211,6 +189,19 @@ fn on_screen(out: &Path, n: usize, run: &mut Child) {
     std::thread::sleep(Duration::from_millis(500));
 }
 
+/// The largest channel difference between an image `w` wide and the
+/// screen (`sw` wide) where the image's top left is at `at`.
+fn region_diff(screen: &[[u8; 3]], sw: usize, img: &[[u8; 3]], w: usize, at: (usize, usize)) -> u8 {
+    img.iter()
+        .enumerate()
+        .flat_map(|(i, b)| {
+            let a = screen[(at.1 + i / w) * sw + at.0 + i % w];
+            (0..3).map(move |c| a[c].abs_diff(b[c]))
+        })
+        .max()
+        .unwrap_or(0)
+}
+
 /// The stats of every back end, one JSON object a line.
 fn stats(out: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(out.join("stats.jsonl"))
@@ -249,17 +240,9 @@ fn the_wall_on_one_x_screen_shows_every_projector_equal_to_its_png() {
         for p in 0..16usize {
             let (w, h, png) = read_png(&last.join(format!("p{p:02}.png")));
             assert_eq!((w, h), (160, 90));
-            let (x0, y0) = ((p % 4) * 160, (p / 4) * 90);
-            for y in 0..h {
-                for xx in 0..w {
-                    let a = screen[(y0 + y) * sw + x0 + xx];
-                    let b = png[y * w + xx];
-                    for c in 0..3 {
-                        worst = worst.max(a[c].abs_diff(b[c]));
-                    }
-                    lit += (b != [0, 0, 0]) as usize;
-                }
-            }
+            let at = ((p % 4) * 160, (p / 4) * 90);
+            worst = worst.max(region_diff(&screen, sw, &png, w, at));
+            lit += png.iter().filter(|b| **b != [0, 0, 0]).count();
         }
         eprintln!("frames {frames}: the screen and the PNGs differ by at most {worst}/255");
         assert!(lit > 1000, "the frame shows the volume ({lit} pixels)");
@@ -354,7 +337,7 @@ fn outputs_by_name_and_rect_place_projectors_side_by_side() {
     let (sw, _, screen) = x.screen();
     let mut worst = 0u8;
     for p in 0..16usize {
-        let (w, h, png) = read_png(&out.join(format!("frame_00001/p{p:02}.png")));
+        let (w, _, png) = read_png(&out.join(format!("frame_00001/p{p:02}.png")));
         // The named output starts at the screen's corner; the rect's
         // viewports are 2 pixels in and 5 down, at y = 120.
         let (x0, y0) = if p < 8 {
@@ -362,15 +345,7 @@ fn outputs_by_name_and_rect_place_projectors_side_by_side() {
         } else {
             ((p - 8) * 160 + 2, 125)
         };
-        for y in 0..h {
-            for xx in 0..w {
-                let a = screen[(y0 + y) * sw + x0 + xx];
-                let b = png[y * w + xx];
-                for c in 0..3 {
-                    worst = worst.max(a[c].abs_diff(b[c]));
-                }
-            }
-        }
+        worst = worst.max(region_diff(&screen, sw, &png, w, (x0, y0)));
     }
     eprintln!("two outputs, read back: the screen and the PNGs differ by at most {worst}/255");
     assert!(worst <= 1, "screen and PNGs differ by {worst}/255");

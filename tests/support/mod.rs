@@ -29,3 +29,35 @@ pub fn inputs(name: &str) -> PathBuf {
     })
     .clone()
 }
+
+/// The volume most binary-level tests render: `parallax synth <kind> --size
+/// <size>` imported with bricks of 16 as `dir/v.pxo`, and a three-point
+/// transfer function `dir/tf.toml`.
+pub fn volume(dir: &Path, kind: &str, size: u32) {
+    let bin = env!("CARGO_BIN_EXE_parallax");
+    let (nrrd, pxo) = (dir.join("v.nrrd"), dir.join("v.pxo"));
+    let size = size.to_string();
+    for args in [
+        vec!["synth", kind, "--size", &size, "-o", nrrd.to_str().unwrap()],
+        vec![
+            "import",
+            nrrd.to_str().unwrap(),
+            "-o",
+            pxo.to_str().unwrap(),
+            "--brick",
+            "16",
+        ],
+    ] {
+        let o = Command::new(bin).args(&args).output().unwrap();
+        assert!(
+            o.status.success(),
+            "parallax {args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    std::fs::write(
+        dir.join("tf.toml"),
+        "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 100\ncolor = [0.2, 0.5, 1]\nextinction = 0.05\n[[point]]\nvalue = 255\ncolor = [1, 0.8, 0.4]\nextinction = 0.4\n",
+    )
+    .unwrap();
+}
