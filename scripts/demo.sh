@@ -24,9 +24,13 @@ cp "$out/brain/frame_00007/window.png" "$out/colin27-brain.png"
 
 # Tools and enhancers: a clip plane with an emphasis band, and MImDA.
 $px render --scene configs/scenes/colin27-clip.toml --frames 8 --sync --out "$out/clip"
+$px render --scene configs/scenes/colin27-probe.toml --frames 8 --sync --out "$out/probe"
+$px render --scene configs/scenes/colin27-band.toml --frames 8 --sync --out "$out/band"
 $px render --scene configs/scenes/colin27-mimda.toml --frames 8 --sync --out "$out/mimda"
 $px render --scene configs/scenes/colin27-iso.toml --frames 8 --sync --out "$out/iso"
 cp "$out/clip/frame_00007/window.png" "$out/colin27-clip.png"
+cp "$out/probe/frame_00007/window.png" "$out/colin27-probe.png"
+cp "$out/band/frame_00007/window.png" "$out/colin27-band.png"
 cp "$out/mimda/frame_00007/window.png" "$out/colin27-mimda.png"
 cp "$out/iso/frame_00007/window.png" "$out/colin27-iso.png"
 
@@ -44,6 +48,16 @@ $px render --scene configs/scenes/colin27-wall-clip.toml --frames 6 --sync --out
 $px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16-clip/frame_00005" \
   --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-clip-eyes.png"
 
+# The context-preserving probe on the wall: eyes on the right look along its
+# axis and keep the edges of the tissue it clears; from the left they are
+# gone.
+$px render --scene configs/scenes/colin27-wall-probe.toml --frames 6 --sync --out "$out/wall16-probe"
+$px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16-probe/frame_00005" \
+  --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-probe-eyes.png"
+$px render --scene configs/scenes/colin27-wall-band.toml --frames 6 --sync --out "$out/wall16-band"
+$px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16-band/frame_00005" \
+  --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-band-eyes.png"
+
 # A Looking Glass Portrait: its 48 views interleaved onto the panel's
 # sub-pixels through the lenticular mapping of its calibration (the display
 # in configs/displays/looking-glass-portrait/ was made from its visual.json
@@ -53,6 +67,7 @@ cp "$out/looking-glass/frame_00005/panel.png" "$out/looking-glass-panel.png"
 
 echo
 echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png, $out/colin27-clip.png,"
-echo "         $out/colin27-mimda.png, $out/colin27-iso.png, $out/wall16-eyes.png, $out/wall16-clip-eyes.png"
+echo "         $out/colin27-mimda.png, $out/colin27-iso.png, $out/wall16-eyes.png, $out/wall16-clip-eyes.png,"
+echo "         $out/colin27-probe.png, $out/colin27-band.png, $out/wall16-probe-eyes.png, $out/wall16-band-eyes.png"
 echo "         and $out/looking-glass-panel.png (the panel of a Looking Glass, interleaved for its lenses)"
 echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"

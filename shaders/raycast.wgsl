@@ -377,28 +377,47 @@ fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f
     smp.len = tn - tc;
     smp.dir = d;
     smp.scalar = s;
+    smp.scalar_prev = s_prev;
     smp.tau = avg.x;
     smp.emission = avg.yzw;
     smp.alpha_scale = 1.0;
     smp.alpha_mix = 0.0;
+    smp.color_scale = 1.0;
     smp.material = frame.light;
-    if (NEEDS_AUX) {
+    // What the enhancers read, computed only where one that reads it acts
+    // (`chain_active`: a probe's sphere), so that a tool costs its inputs
+    // only where it has an effect.
+    // MImDA reads the importance only of segments with extinction (the
+    // others take no part), refraction reads ν everywhere.
+    // In tiles that meet no tool's region (the pipeline without
+    // TOOL_TILES) none of this is compiled in.
+    var inputs = false;
+    let tools_here = (NEEDS_GRADIENT || TOOL_AUX) && TOOL_TILES;
+    if (tools_here) {
+        inputs = chain_active(&smp);
+    }
+    if ((NEEDS_AUX && (REFRACTION || smp.tau > 0.0)) || (TOOL_AUX && inputs)) {
         let aux = segment_average(frame.aux.x, frame.aux.y, s_prev, s);
         smp.importance = aux.x;
         smp.refraction = aux.y;
     }
-    if (NEEDS_GRADIENT) {
+    // The gradient (six fetches): for the enhancers where they act, and for
+    // shading where the segment has extinction — a transparent segment adds
+    // nothing, and tools blend towards opacity only where τ̄ > 0. Computed
+    // before the enhancers, in one place per kind of tile: a CPU device
+    // runs a divergent branch's body for all lanes.
+    let shaded = SHADING && smp.tau > 0.0;
+    if (tools_here) {
+        if (inputs || shaded) {
+            smp.gradient = gradient_levels(lv, blend, smp.pos);
+        }
+    } else if (shaded) {
         smp.gradient = gradient_levels(lv, blend, smp.pos);
     }
     chain_sample(&smp);
     var shade = 1.0;
-    // A transparent segment adds nothing: no gradient needed.
-    if (SHADING && (smp.tau > 0.0 || smp.alpha_mix > 0.0)) {
-        var g = smp.gradient;
-        if (!NEEDS_GRADIENT) {
-            g = gradient_levels(lv, blend, smp.pos);
-        }
-        shade = phong(g, d, smp.material);
+    if (shaded) {
+        shade = phong(smp.gradient, d, smp.material);
     }
     accumulate(acc, segment_optics(smp, shade), smp);
     return smp;
@@ -412,8 +431,10 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     // at the workgroup's index, a value a compiler can know to be uniform
     // across the workgroup.
     load_constants();
-    let w = wg.x + wg.y * groups.x;
-    if (w >= frame.dispatch.x) {
+    let first = select(frame.dispatch.w, 0u, TOOL_TILES);
+    let end = select(frame.dispatch.x, frame.dispatch.w, TOOL_TILES);
+    let w = first + wg.x + wg.y * groups.x;
+    if (w >= end) {
         return;
     }
     let tile = tile_at(w);

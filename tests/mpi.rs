@@ -496,11 +496,12 @@ fn a_stopped_back_end_is_named_within_the_watchdog_timeout() {
     assert_eq!(stats.len(), 2 * 2, "frames 0 and 1 from two back ends");
 }
 
-/// Tools and MImDA in the cluster: three chained clip planes (one moved by
-/// the script, so the tool set is re-sent) and γ > 0 render identically
-/// under `mpirun -n 3` and embedded with two back ends.
+/// Tools and MImDA in the cluster: two clip planes (one moved by the
+/// script, so the tool set is re-sent) and a context-preserving probe
+/// chained, and γ > 0, render identically under `mpirun -n 3` and embedded
+/// with two back ends.
 #[test]
-fn three_clip_planes_and_mimda_render_identically_in_the_cluster() {
+fn clip_planes_a_probe_and_mimda_render_identically_in_the_cluster() {
     let w = World::new();
     std::fs::write(
         w.path("tf-importance.toml"),
@@ -518,7 +519,7 @@ fn three_clip_planes_and_mimda_render_identically_in_the_cluster() {
             .replace("[render]\n", "[render]\nmode = \"mimda\"\ngamma = 0.7\n")
             + "[[tool]]\nkind = \"clip-plane\"\npoint = [0, 0, 0.12]\nnormal = [0, 0, 1]\nthickness = 0.02\n\
                [[tool]]\nkind = \"clip-plane\"\npoint = [0.05, 0, 0]\nnormal = [1, 0, 0.3]\ncontext = [0.2, 0.9]\n\
-               [[tool]]\nkind = \"clip-plane\"\npoint = [0, -0.06, 0]\nnormal = [0, -1, 0]\n",
+               [[tool]]\nkind = \"probe\"\ncenter = [0, 0, 0.04]\nradius = 0.05\n",
     )
     .unwrap();
     let script = w.path("move.toml");

@@ -16,7 +16,7 @@ use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Filter, Interpolation, Mode, RenderConfig, Shading};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
-use parallax_common::tools::{Tool, MAX_ENHANCERS};
+use parallax_common::tools::{PackContext, Tool, MAX_ENHANCERS};
 use std::collections::VecDeque;
 use std::path::Path;
 use std::sync::Arc;
@@ -316,26 +316,33 @@ impl Renderer {
     /// The kernel and its parameters for this frame's scene state.
     fn settings(&self, placement: &Placement, cfg: &RenderConfig) -> RenderSettings {
         let scene_extent = self.geometry(placement).extent();
+        let ctx = PackContext {
+            placement: *placement,
+            extent: scene_extent,
+            gradient_max: self.gradient_max(),
+        };
+        // Tools that cannot change the volume's box are left out of the
+        // kernel: a scene pays nothing for a tool moved away.
+        let acting: Vec<&Tool> = self.tools.1.iter().filter(|t| t.acts_on(&ctx)).collect();
         let mut tools = [ToolParams::default(); MAX_ENHANCERS];
-        for (p, t) in tools.iter_mut().zip(&self.tools.1) {
-            if let Tool::ClipPlane(c) = t {
-                let v = c.in_volume(placement, scene_extent);
-                let f = |x: f64| x as f32;
-                p.a = [f(v.normal.x), f(v.normal.y), f(v.normal.z), f(v.offset)];
-                p.b = [f(v.unit.x), f(v.unit.y), f(v.unit.z), f(c.thickness)];
-                p.c = [f(c.context[0]), f(c.context[1]), 0.0, 0.0];
-            }
+        for (p, t) in tools.iter_mut().zip(&acting) {
+            let [a, b, c, d] = t.pack(&ctx);
+            *p = ToolParams { a, b, c, d };
         }
+        let tool_regions = acting.iter().filter_map(|t| t.region(&ctx)).collect();
         RenderSettings {
             reconstruct: None,
             step_factor: cfg.step_factor as f32,
             early_termination: cfg.early_termination as f32,
             shading: cfg.shading == Shading::Phong,
             kernel: KernelKey {
-                mimda: cfg.mode == Mode::Mimda,
+                // MImDA at γ = 0 is DVR: β = 1 on every segment, the same
+                // operations (steppers/mimda.wgsl). The DVR kernel gives
+                // that image without reading the importance.
+                mimda: cfg.mode == Mode::Mimda && cfg.gamma > 0.0,
                 refraction: cfg.refraction,
                 iso: cfg.mode == Mode::Iso,
-                enhancers: self.tools.1.iter().map(Tool::enhancer).collect(),
+                enhancers: acting.iter().map(|t| t.enhancer()).collect(),
             },
             gamma: if cfg.mode == Mode::Mimda {
                 cfg.gamma as f32
@@ -352,6 +359,7 @@ impl Renderer {
             subframe: None,
             predict: [0.0; 4],
             tools,
+            tool_regions,
             macrocells: cfg.macrocells,
             count_samples: self.count_samples,
             tile_culling: self.tile_culling,
@@ -369,6 +377,26 @@ impl Renderer {
             tricubic: cfg.filter == Filter::Tricubic,
             preintegration: cfg.preintegration,
         }
+    }
+
+    /// ∇_max of the probe's η (G10 Eq. 5): the transfer function's value
+    /// span over the finest voxel, the steepest change one voxel can carry
+    /// within the values the function maps.
+    fn gradient_max(&self) -> f64 {
+        let span = self.tf.as_ref().map_or(1.0, |t| {
+            let p = t.function.points();
+            match (p.first(), p.last()) {
+                (Some(a), Some(b)) if b.value > a.value => b.value - a.value,
+                _ => 1.0,
+            }
+        });
+        span / self.finest_voxel().max(1e-30)
+    }
+
+    /// The smallest voxel side of the volume (data length units).
+    fn finest_voxel(&self) -> f64 {
+        let spacing = self.db.header.info.spacing;
+        spacing.iter().cloned().fold(f64::INFINITY, f64::min)
     }
 
     fn geometry(&self, placement: &Placement) -> SceneGeometry {
@@ -632,15 +660,7 @@ impl Renderer {
             Some((k, c)) if k.continues(&key) && c + 1 < cfg.full_traversal_every => c + 1,
             _ => 0,
         };
-        let window = PREDICTION_WINDOW_VOXELS
-            * self
-                .db
-                .header
-                .info
-                .spacing
-                .iter()
-                .cloned()
-                .fold(f64::INFINITY, f64::min);
+        let window = PREDICTION_WINDOW_VOXELS * self.finest_voxel();
         settings.predict = [
             if since == 0 { 1.0 } else { 2.0 },
             window as f32,

@@ -9,8 +9,9 @@ use parallax_backend::render::Renderer;
 use parallax_backend::store::BrickEncoding;
 use parallax_backend::volume::VoxelType;
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{Interpolation, RenderConfig, Shading};
+use parallax_common::config::{Interpolation, Mode, RenderConfig, Shading};
 use parallax_common::tf::TransferFunction;
+use parallax_common::tools::{Probe, Tool};
 use std::path::Path;
 use support::{colin27, colin_placement, configs, import_file};
 
@@ -23,6 +24,18 @@ fn compare(
     placement: &Placement,
     cfg: &RenderConfig,
 ) -> (u64, u64) {
+    compare_with(what, db, tf, &[], placement, cfg)
+}
+
+/// `compare` with tools.
+fn compare_with(
+    what: &str,
+    db: &Path,
+    tf: &TransferFunction,
+    tools: &[Tool],
+    placement: &Placement,
+    cfg: &RenderConfig,
+) -> (u64, u64) {
     let view = View::window([160, 120], [0.4, 0.3], [0.0, 0.0, 0.8]);
     let run = |macrocells: bool| {
         let cfg = RenderConfig {
@@ -31,6 +44,7 @@ fn compare(
         };
         let mut r = Renderer::new(db, &cfg).unwrap();
         r.set_transfer_function(1, tf).unwrap();
+        r.set_tools(1, tools).unwrap();
         r.count_samples = true;
         let f = r.converge(placement, &[view], &cfg, 64).unwrap();
         (f.images.into_iter().next().unwrap(), f.stats.samples)
@@ -88,6 +102,53 @@ fn colin27_skin_and_brain_unchanged_with_fewer_samples() {
         &colin_placement(),
         &RenderConfig::default(),
     );
+}
+
+/// Every kernel whose tools add no opacity keeps macrocell skipping (G10
+/// pays about 10 % for a tool): the clip plane with its emphasis band, the
+/// context-preserving probe, MImDA (whose largest importance counts only
+/// segments with extinction) — each image the same bit for bit, with
+/// fewer samples.
+#[test]
+fn tool_kernels_keep_macrocells() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(db) = colin27(dir.path(), BrickEncoding::U8Range) else {
+        return;
+    };
+    let skin = TransferFunction::load(configs().join("tf/colin27-skin.toml")).unwrap();
+    let brain = TransferFunction::load(configs().join("tf/colin27-brain.toml")).unwrap();
+    let phong = RenderConfig {
+        shading: Shading::Phong,
+        ..RenderConfig::default()
+    };
+    let mimda = RenderConfig {
+        mode: Mode::Mimda,
+        gamma: 0.6,
+        ..RenderConfig::default()
+    };
+    let probe = [Tool::Probe(Probe::new([0.0, 0.02, 0.08], 0.05))];
+    let both = [support::clip_plane()[0].clone(), probe[0].clone()];
+    let cases: [(&str, &TransferFunction, &[Tool], &RenderConfig); 4] = [
+        (
+            "skin, clip plane, Phong",
+            &skin,
+            &support::clip_plane(),
+            &phong,
+        ),
+        ("skin, probe, Phong", &skin, &probe, &phong),
+        ("brain, clip plane and probe, MImDA", &brain, &both, &mimda),
+        ("brain, MImDA", &brain, &[], &mimda),
+    ];
+    for (what, tf, tools, cfg) in cases {
+        compare_with(
+            &format!("Colin27 {what}"),
+            &db,
+            tf,
+            tools,
+            &colin_placement(),
+            cfg,
+        );
+    }
 }
 
 #[test]

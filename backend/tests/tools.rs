@@ -12,7 +12,7 @@ use parallax_backend::volume::{Volume, VoxelType};
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Mode, RenderConfig, Shading};
 use parallax_common::tf::{ControlPoint, TransferFunction};
-use parallax_common::tools::{ClipPlane, Tool};
+use parallax_common::tools::{BandPicker, ClipPlane, Probe, Tool};
 use std::path::Path;
 use support::{assert_valid, exact_config, import_volume, marschner_lobb, mean_alpha, translucent};
 
@@ -50,6 +50,24 @@ fn ml32(dir: &Path) -> (Volume, std::path::PathBuf) {
 
 fn head_on() -> View {
     View::window([40, 30], [0.4, 0.3], [0.01, 0.005, 0.8])
+}
+
+/// Concentric shells (period 4 voxels) about the exact centre of a 32³ box,
+/// in full-precision bricks of 8.
+fn shells(dir: &Path) -> std::path::PathBuf {
+    let n = 32;
+    let c = n as f64 / 2.0;
+    let vol = Volume::from_fn([n, n, n], [1.0; 3], VoxelType::U8, |i, j, k| {
+        let r = DVec3::new(i as f64 + 0.5 - c, j as f64 + 0.5 - c, k as f64 + 0.5 - c).length();
+        if r < 0.45 * n as f64 {
+            (128.0 + 127.0 * (std::f64::consts::PI * r / 4.0).cos()).round() as f32
+        } else {
+            0.0
+        }
+    });
+    let db = dir.join("shells.pxo");
+    import_volume(&vol, &db, 8, BrickEncoding::F32);
+    db
 }
 
 /// G10 §4 clip plane viewed head-on (context factor 0 on every ray) with no
@@ -107,19 +125,7 @@ fn a_clip_plane_head_on_removes_exactly_its_half_space() {
 #[test]
 fn context_returns_monotonically_as_the_view_turns_parallel() {
     let dir = tempfile::tempdir().unwrap();
-    // Concentric shells about the exact centre of the box.
-    let n = 32;
-    let c = n as f64 / 2.0;
-    let vol = Volume::from_fn([n, n, n], [1.0; 3], VoxelType::U8, |i, j, k| {
-        let r = DVec3::new(i as f64 + 0.5 - c, j as f64 + 0.5 - c, k as f64 + 0.5 - c).length();
-        if r < 0.45 * n as f64 {
-            (128.0 + 127.0 * (std::f64::consts::PI * r / 4.0).cos()).round() as f32
-        } else {
-            0.0
-        }
-    });
-    let db = dir.path().join("shells.pxo");
-    import_volume(&vol, &db, 8, BrickEncoding::F32);
+    let db = shells(dir.path());
     let tf = translucent();
     let placement = centred([0.0; 3]);
     // Nearly parallel rays, so that the part the plane keeps has the same
@@ -137,7 +143,8 @@ fn context_returns_monotonically_as_the_view_turns_parallel() {
             .map(|p| -(1.0 - p[3] as f64).max(1e-12).ln())
             .sum::<f64>()
     };
-    let all = depth(&render(&db, &tf, &[], &placement, &view, &cfg));
+    let plain = render(&db, &tf, &[], &placement, &view, &cfg);
+    let all = depth(&plain);
     let mut last = 0.0;
     let mut alphas = Vec::new();
     for deg in (0..=90).step_by(10) {
@@ -148,21 +155,23 @@ fn context_returns_monotonically_as_the_view_turns_parallel() {
             thickness: 0.0,
             context: [0.3, 0.7],
         };
-        let m = depth(&render(
-            &db,
-            &tf,
-            &[Tool::ClipPlane(plane)],
-            &placement,
-            &view,
-            &cfg,
-        ));
+        let img = render(&db, &tf, &[Tool::ClipPlane(plane)], &placement, &view, &cfg);
+        let m = depth(&img);
         alphas.push((deg, m));
         // While μ = 0 (1 − cos a < f_l: a < 45.6°) the kept half is the
-        // same up to the pixel grid (1%); from then on it rises.
+        // same up to the pixel grid (1%); from then on it rises, until
+        // μ = 1 on every ray (1 − cos a ≥ f_h: a ≥ 72.5°, and the rays
+        // spread by ±1.2°): then the plane changes nothing, and the image
+        // is no plane's, bit for bit (no ray gets a break).
         if deg < 50 {
             assert!(m >= last * 0.99, "{deg}°: {m} after {last}");
-        } else {
+        } else if deg < 75 {
             assert!(m > last, "{deg}°: {m} after {last}");
+        } else {
+            assert!(
+                img == plain,
+                "{deg}°: μ = 1 but the image is not no plane's"
+            );
         }
         last = m;
     }
@@ -171,6 +180,227 @@ fn context_returns_monotonically_as_the_view_turns_parallel() {
     assert!(first < 0.6 * all, "head-on the front half is gone");
     assert!(end > 0.99 * all, "parallel to the view it is all back");
     assert!(end > 1.5 * first);
+}
+
+/// Σ optical depth −ln(1 − α) over `pixels` of an image.
+fn optical_depth(img: &[[f32; 4]], pixels: impl Iterator<Item = usize>) -> f64 {
+    pixels
+        .map(|i| -(1.0 - img[i][3] as f64).max(1e-12).ln())
+        .sum()
+}
+
+/// A probe at the shells' centre with this axis and radius.
+fn probe_at_centre(axis: [f64; 3], radius: f64) -> Tool {
+    Tool::Probe(Probe {
+        axis,
+        ..Probe::new([0.0; 3], radius)
+    })
+}
+
+/// Whether the ray of pixel (i, j) of `view` passes within `r` of `c`.
+fn ray_within(view: &View, i: u32, j: u32, c: DVec3, r: f64) -> bool {
+    let e = DVec3::from(view.eye);
+    let d = (view.screen_point(i, j) - e).normalize();
+    let w = c - e;
+    (w - d * w.dot(d)).length() < r
+}
+
+/// G10 §4 context-preserving probe in the concentric shells, head-on: the
+/// image is bit for bit that of no probe on every ray that passes outside
+/// its sphere, and changed on the rays through it.
+#[test]
+fn a_probe_changes_only_the_rays_through_its_sphere() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = shells(dir.path());
+    let tf = translucent();
+    let placement = centred([0.0; 3]);
+    let view = View::window([64, 64], [0.32, 0.32], [0.0, 0.0, 0.8]);
+    let cfg = RenderConfig {
+        shading: Shading::Phong,
+        ..exact_config()
+    };
+    let (c, r) = (DVec3::new(0.02, -0.01, 0.03), 0.05);
+    let probe = Tool::Probe(Probe::new(c.to_array(), r));
+    let plain = render(&db, &tf, &[], &placement, &view, &cfg);
+    let img = render(&db, &tf, &[probe], &placement, &view, &cfg);
+    let (mut outside, mut same, mut inside, mut changed) = (0, 0, 0, 0);
+    let px = 0.32 / 64.0;
+    for j in 0..64 {
+        for i in 0..64 {
+            let k = (j * 64 + i) as usize;
+            if !ray_within(&view, i, j, c, r + px) {
+                outside += 1;
+                same += (img[k].map(f32::to_bits) == plain[k].map(f32::to_bits)) as usize;
+            } else if ray_within(&view, i, j, c, r - px) {
+                inside += 1;
+                changed += (img[k] != plain[k]) as usize;
+            }
+        }
+    }
+    eprintln!("probe: {same} of {outside} pixels outside its sphere unchanged, {changed} of {inside} inside changed");
+    assert!(outside > 1000 && inside > 100);
+    assert_eq!(same, outside, "pixels outside the probe's sphere changed");
+    assert!(
+        changed as f64 > 0.95 * inside as f64,
+        "{changed} of {inside}"
+    );
+}
+
+/// Looking along its axis at surfaces that face the viewer (the shells'
+/// fronts), the probe is transparent at its centre: η ≈ 0 there, so the
+/// front half is cleared as if η were 0 everywhere; turning the axis away
+/// (ω_a = 0, no contextual edges at all) changes the centre's optical
+/// depth by little, while the probe (radius 0.1 m of the shells' 0.135 m)
+/// removes over a quarter of it.
+#[test]
+fn a_probe_facing_the_viewer_is_transparent_at_its_centre() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = shells(dir.path());
+    let tf = translucent();
+    let placement = centred([0.0; 3]);
+    let view = View::window([64, 64], [0.32, 0.32], [0.0, 0.0, 0.8]);
+    let cfg = exact_config();
+    let probe = |axis: [f64; 3]| probe_at_centre(axis, 0.1);
+    let centre = || (30..34).flat_map(|j| (30..34).map(move |i| j * 64 + i));
+    let plain = optical_depth(&render(&db, &tf, &[], &placement, &view, &cfg), centre());
+    let facing = render(&db, &tf, &[probe([0.0, 0.0, 1.0])], &placement, &view, &cfg);
+    let away = render(
+        &db,
+        &tf,
+        &[probe([0.0, 0.0, -1.0])],
+        &placement,
+        &view,
+        &cfg,
+    );
+    let (d_facing, d_away) = (
+        optical_depth(&facing, centre()),
+        optical_depth(&away, centre()),
+    );
+    eprintln!(
+        "probe centre, optical depth: no probe {plain:.3}, axis to the viewer {d_facing:.3}, axis away {d_away:.3}"
+    );
+    assert!(d_facing < 0.75 * plain, "{d_facing} vs {plain}");
+    assert!(
+        (d_facing - d_away).abs() < 0.05 * (plain - d_away),
+        "{d_facing} vs {d_away}"
+    );
+}
+
+/// The probe's contextual edges (η's rim, the shells seen edge-on) show
+/// when the eye looks along the axis and fade when it looks from 45°: the
+/// change the edges make to the image (axis to the viewer against axis
+/// away) at two eye positions, the same probe, the same data.
+#[test]
+fn the_probe_edges_follow_the_view_direction() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = shells(dir.path());
+    let tf = translucent();
+    let placement = centred([0.0; 3]);
+    let cfg = exact_config();
+    let probe = |axis: [f64; 3]| probe_at_centre(axis, 0.08);
+    let edges = |eye: [f64; 3]| {
+        let view = View::window([64, 64], [0.32, 0.32], eye);
+        let on = render(&db, &tf, &[probe([0.0, 0.0, 1.0])], &placement, &view, &cfg);
+        let off = render(
+            &db,
+            &tf,
+            &[probe([0.0, 0.0, -1.0])],
+            &placement,
+            &view,
+            &cfg,
+        );
+        on.iter()
+            .zip(&off)
+            .map(|(a, b)| (a[3] - b[3]).abs() as f64)
+            .sum::<f64>()
+    };
+    let a = 45f64.to_radians();
+    let head_on = edges([0.0, 0.0, 0.8]);
+    let side = edges([0.8 * a.sin(), 0.0, 0.8 * a.cos()]);
+    eprintln!("probe edges: Σ|Δα| {head_on:.2} looking along the axis, {side:.2} from 45°");
+    assert!(head_on > 5.0, "{head_on}");
+    assert!(side < 0.2 * head_on, "{side} vs {head_on}");
+}
+
+/// G10 §4 band picker on two balls, A (value 100) left and B (value 200)
+/// right: looking along its axis only the band (B's values) is seen —
+/// every pixel whose ray meets no band value is empty, exactly — and B
+/// stays; from 60° the other band returns, and with ω_a = 0 the image is no
+/// tool's, bit for bit.
+#[test]
+fn the_band_picker_shows_only_its_band_along_its_axis() {
+    let dir = tempfile::tempdir().unwrap();
+    let ball = |x: f64, y: f64, z: f64, cx: f64| {
+        let r = DVec3::new(x - cx, y - 16.0, z - 16.0).length();
+        ((9.0 - r) / 2.0).clamp(0.0, 1.0)
+    };
+    let vol = Volume::from_fn([48, 32, 32], [1.0; 3], VoxelType::U8, |i, j, k| {
+        let (x, y, z) = (i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5);
+        (100.0 * ball(x, y, z, 12.0) + 200.0 * ball(x, y, z, 36.0)).round() as f32
+    });
+    let db = dir.path().join("balls.pxo");
+    import_volume(&vol, &db, 8, BrickEncoding::F32);
+    let tf = TransferFunction::from_points(vec![
+        ControlPoint::new(0.0, [0.0; 3], 0.0),
+        ControlPoint::new(40.0, [0.2, 0.4, 1.0], 0.0),
+        ControlPoint::new(60.0, [0.2, 0.4, 1.0], 0.08),
+        ControlPoint::new(255.0, [1.0, 0.6, 0.2], 0.08),
+    ])
+    .unwrap();
+    let placement = centred([0.0; 3]);
+    let cfg = exact_config();
+    let picker = Tool::BandPicker(BandPicker {
+        band: [150.0, 170.0, 230.0, 250.0],
+        axis: [0.0, 0.0, 1.0],
+        alignment: [0.7, 0.95],
+    });
+    // Columns left of the middle see only A, the others only B (rays
+    // nearly parallel, from 8 m).
+    let along = View::window([48, 32], [0.36, 0.24], [0.0, 0.0, 8.0]);
+    let plain = render(&db, &tf, &[], &placement, &along, &cfg);
+    let img = render(
+        &db,
+        &tf,
+        std::slice::from_ref(&picker),
+        &placement,
+        &along,
+        &cfg,
+    );
+    let lit = |img: &[[f32; 4]], left: bool| {
+        (0..img.len())
+            .filter(|&k| ((k % 48) < 24) == left && img[k][3] > 0.01)
+            .count()
+    };
+    let a_pixels = lit(&plain, true);
+    let a_left = (0..img.len())
+        .filter(|&k| k % 48 < 24 && img[k] != [0.0; 4])
+        .count();
+    eprintln!(
+        "band picker along its axis: A {a_pixels} pixels lit without it, {a_left} with it; B {} and {}",
+        lit(&plain, false),
+        lit(&img, false)
+    );
+    assert!(a_pixels > 100);
+    assert_eq!(a_left, 0, "pixels whose rays meet no band value are empty");
+    // B's core (values in the band along every ray within 4 px of its
+    // centre, at column 33.5, row 15.5) stays; its rim, whose rays meet
+    // only values below the band, goes too.
+    let core: Vec<usize> = (0..img.len())
+        .filter(|&k| {
+            let (i, j) = ((k % 48) as f64, (k / 48) as f64);
+            (i - 33.5).hypot(j - 15.5) < 4.0
+        })
+        .collect();
+    assert!(core.len() > 30);
+    for &k in &core {
+        assert!(img[k][3] > 0.01, "B's core pixel {k}: {:?}", img[k]);
+    }
+    let a = 60f64.to_radians();
+    let across = View::window([48, 32], [0.36, 0.24], [8.0 * a.sin(), 0.0, 8.0 * a.cos()]);
+    let plain = render(&db, &tf, &[], &placement, &across, &cfg);
+    let img = render(&db, &tf, &[picker], &placement, &across, &cfg);
+    assert!(mean_alpha(&plain) > 0.01);
+    assert!(img == plain, "from 60° the band picker changes nothing");
 }
 
 /// The emphasis band: behind the plane, within `thickness`, the sliced
@@ -213,7 +443,10 @@ fn the_emphasis_band_makes_the_slice_opaque() {
 
 /// MImDA with γ = 0 is plain DVR, bit for bit (G10 §4: "smoothly
 /// interpolate from plain volume rendering (with γ = 0)"), with and
-/// without shading, and whatever the early-termination threshold.
+/// without shading, and whatever the early-termination threshold. At
+/// γ = 0 the renderer runs the DVR kernel; at γ = 10⁻¹² the MImDA kernel
+/// runs and every β = 1 − γ·δ rounds to 1 in f32, so its operations must
+/// be DVR's.
 #[test]
 fn mimda_with_gamma_zero_is_dvr_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
@@ -227,15 +460,17 @@ fn mimda_with_gamma_zero_is_dvr_bit_for_bit() {
             early_termination: early,
             ..exact_config()
         };
-        let mimda = RenderConfig {
-            mode: Mode::Mimda,
-            gamma: 0.0,
-            ..dvr.clone()
-        };
         let a = render(&db, &tf, &[], &placement, &view, &dvr);
-        let b = render(&db, &tf, &[], &placement, &view, &mimda);
         assert!(mean_alpha(&a) > 0.1);
-        assert!(a == b, "{shading:?}: γ = 0 differs from DVR");
+        for gamma in [0.0, 1e-12] {
+            let mimda = RenderConfig {
+                mode: Mode::Mimda,
+                gamma,
+                ..dvr.clone()
+            };
+            let b = render(&db, &tf, &[], &placement, &view, &mimda);
+            assert!(a == b, "{shading:?}: γ = {gamma} differs from DVR");
+        }
     }
 }
 

@@ -35,7 +35,7 @@ fn plane(x: f64) -> Tool {
 }
 
 /// `tf` with a refraction index rising from 1 to 1.1 over its range.
-fn bending(tf: &TransferFunction) -> Result<TransferFunction> {
+pub fn bending(tf: &TransferFunction) -> Result<TransferFunction> {
     let points = tf.points();
     let (lo, hi) = (points[0].value, points.last().unwrap().value);
     TransferFunction::from_points(
@@ -126,12 +126,7 @@ pub fn run(
     let mut frame_ms = vec![Vec::new(); combos.len()];
     let mut render_ms = vec![Vec::new(); combos.len()];
     for round in 0..rounds {
-        let order: Vec<usize> = if round % 2 == 0 {
-            (0..combos.len()).collect()
-        } else {
-            (0..combos.len()).rev().collect()
-        };
-        for i in order {
+        for i in measure::round_order(round, combos.len()) {
             let (_, _, c, tf) = &combos[i];
             let (f, ms) = timed_frame(
                 &mut renderers[i],

@@ -7,6 +7,8 @@
 //! - [`sweep`]: error against the exact integral beside frame time for every
 //!   quality knob (CSV, SVG work–precision plot, convergence orders), and
 //!   [`kernels`]: the cost of each kernel combination;
+//! - [`tools`]: what each tool and stepper costs, placed where it changes
+//!   nothing and in place;
 //! - [`codecs`]: ratio and speed of every brick codec;
 //! - [`sequence`]: frame reconstruction (G10 §5) and the prediction buffer
 //!   (B10 §4) against full rendering along an interaction script;
@@ -25,3 +27,4 @@ mod plot;
 pub mod seams;
 pub mod sequence;
 pub mod sweep;
+pub mod tools;

@@ -76,6 +76,17 @@ pub fn converged_frame(shot: Shot, cfg: &RenderConfig) -> Result<(Frame, f64)> {
     timed_frame(&mut r, 100, shot, cfg)
 }
 
+/// The order of round `round` over `n` combinations timed round-robin:
+/// forwards, then backwards, so that a change in the machine's load falls
+/// on all of them alike.
+pub fn round_order(round: usize, n: usize) -> Vec<usize> {
+    if round.is_multiple_of(2) {
+        (0..n).collect()
+    } else {
+        (0..n).rev().collect()
+    }
+}
+
 /// The median (the upper one of an even count); `v` is sorted.
 pub fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);

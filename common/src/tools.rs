@@ -5,6 +5,11 @@
 //! end turns every tool into one enhancer of the ray caster's chain (at most
 //! [`MAX_ENHANCERS`], each receiving the previous one's output).
 //!
+//! What each kind of enhancer needs and does is declared once, in
+//! [`ENHANCERS`] (beside its WGSL file `shaders/enhancers/<name>.wgsl`): the
+//! kernel's constants, the culling of empty space and the packing of its
+//! parameters follow from that declaration.
+//!
 //! ```toml
 //! [[tool]]
 //! kind = "clip-plane"
@@ -35,6 +40,10 @@ pub enum Tool {
     PassThrough,
     /// Clip plane with view-dependent context (G10 §4).
     ClipPlane(ClipPlane),
+    /// Context-preserving probe (G10 §4, Eqs. 4–5).
+    Probe(Probe),
+    /// View-dependent band picker (G10 §4, Fig. 9).
+    BandPicker(BandPicker),
     /// Diagnostic: each pixel shows its ray's final direction (volume space,
     /// x/y/z as red/green/blue from [−1, 1]), opaque — how refraction is
     /// checked against Snell's law.
@@ -65,12 +74,93 @@ fn default_context() -> [f64; 2] {
     [0.3, 0.7]
 }
 
+/// G10 §4 "Context-preserving probe": a sphere in display space whose
+/// enhancer multiplies a sample's opacity by μ(α) and its colour by μ(i)
+/// (Eqs. 4–5). With s the sample's distance along the ray from the plane
+/// through the centre facing the ray (negative in front), ω_d = 1 − (s/r)²
+/// (one on that plane, zero a radius away) and
+///   in front (s < 0):  μ(α) = lerp(0, η, ω_d),  μ(i) = 1 − η,
+///   behind   (s ≥ 0):  μ(α) = lerp(η, 1, 1 − ω_d),  μ(i) = lerp(1 − η, 1, 1 − ω_d),
+/// η = ω_a · smoothstep(g_l, g_h, ι·‖∇s‖/∇_max) · (1 − |∇s·v|/‖∇s‖)⁴,
+/// ω_a = smoothstep(a_l, a_h, max(0, −a·v)) for the ray direction v and the
+/// probe's axis a (pointing towards the viewers who see its edges). Samples
+/// outside the sphere are untouched. G10 writes (1 − ∇s·v/‖∇s‖)⁴ without
+/// the absolute value; the gradient's sign says only which side of a
+/// surface is denser, so both sides are treated alike here (η stays ≤ 1).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Probe {
+    /// The sphere's centre (m, display space).
+    pub center: [f64; 3],
+    /// Its radius (m).
+    pub radius: f64,
+    /// The tool's axis: looking against it, contextual edges show.
+    #[serde(default = "default_axis")]
+    pub axis: [f64; 3],
+    /// a_l, a_h of ω_a, over the cosine between the view and the axis.
+    #[serde(default = "default_alignment")]
+    pub alignment: [f64; 2],
+    /// g_l, g_h of η's gradient filter, over ι·‖∇s‖/∇_max.
+    #[serde(default = "default_gradient")]
+    pub gradient: [f64; 2],
+}
+
+/// G10 §4 "Band picker": a band of data values, the trapezoid of four
+/// ordered values b₀ ≤ b₁ ≤ b₂ ≤ b₃ (0 below b₀ and above b₃, 1 on [b₁, b₂]).
+/// For a segment whose values span [s_lo, s_hi], w is the trapezoid's
+/// largest value on that span; with ω_a = smoothstep(a_l, a_h, max(0,
+/// −a·v)) of the ray direction v and the tool's axis a,
+///   importance ← lerp(ι, w, ω_a)   (1 in the band, 0 outside: MImDA lets
+///                                   the band shine through),
+///   opacity    × 1 − ω_a·(1 − w)   (the other bands vanish looking along
+///                                   the axis and return looking across).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BandPicker {
+    /// b₀ … b₃, data values.
+    pub band: [f64; 4],
+    /// Looking against it, only the band is seen.
+    #[serde(default = "default_axis")]
+    pub axis: [f64; 3],
+    /// a_l, a_h of ω_a, over the cosine between the view and the axis.
+    #[serde(default = "default_alignment")]
+    pub alignment: [f64; 2],
+}
+
+fn default_axis() -> [f64; 3] {
+    [0.0, 0.0, 1.0]
+}
+
+/// ω_a is 1 within about 18° of the axis and 0 beyond about 46°.
+fn default_alignment() -> [f64; 2] {
+    [0.7, 0.95]
+}
+
+fn default_gradient() -> [f64; 2] {
+    [0.02, 0.2]
+}
+
+impl Probe {
+    /// A probe at `center` of `radius` with the default axis and filters.
+    pub fn new(center: [f64; 3], radius: f64) -> Probe {
+        Probe {
+            center,
+            radius,
+            axis: default_axis(),
+            alignment: default_alignment(),
+            gradient: default_gradient(),
+        }
+    }
+}
+
 /// The scene-file form of [`Tool`]: `kind = "…"` beside the parameters.
 #[derive(Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 enum ToolTable {
     PassThrough,
     ClipPlane(ClipPlane),
+    Probe(Probe),
+    BandPicker(BandPicker),
     ExitDirection,
 }
 
@@ -79,6 +169,8 @@ impl From<ToolTable> for Tool {
         match t {
             ToolTable::PassThrough => Tool::PassThrough,
             ToolTable::ClipPlane(c) => Tool::ClipPlane(c),
+            ToolTable::Probe(p) => Tool::Probe(p),
+            ToolTable::BandPicker(b) => Tool::BandPicker(b),
             ToolTable::ExitDirection => Tool::ExitDirection,
         }
     }
@@ -89,6 +181,8 @@ impl From<Tool> for ToolTable {
         match t {
             Tool::PassThrough => ToolTable::PassThrough,
             Tool::ClipPlane(c) => ToolTable::ClipPlane(c),
+            Tool::Probe(p) => ToolTable::Probe(p),
+            Tool::BandPicker(b) => ToolTable::BandPicker(b),
             Tool::ExitDirection => ToolTable::ExitDirection,
         }
     }
@@ -119,29 +213,139 @@ pub mod list {
     }
 }
 
-/// The kinds of enhancer a kernel can be built with.
+/// The kinds of enhancer a kernel can be built with, in [`ENHANCERS`]
+/// order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 pub enum EnhancerKind {
     PassThrough,
     ClipPlane,
+    Probe,
+    BandPicker,
     ExitDirection,
 }
 
+/// What an enhancer needs from the kernel and what it does to a ray: the
+/// one declaration of a kind beside its WGSL file. The kernel's constants
+/// (`NEEDS_GRADIENT`, `TOOL_AUX`, `HAS_BREAKS`, `MODIFIES_OPTICS`) and
+/// whether the kernel may skip empty space follow from it
+/// (`backend/src/raycast/shader.rs`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EnhancerSpec {
+    pub kind: EnhancerKind,
+    /// The scene's `kind` and the file `shaders/enhancers/<name>.wgsl`.
+    pub name: &'static str,
+    /// Reads the sample's gradient ∇s. The kernel computes it (six more
+    /// fetches) only for samples where the enhancer's `ENH_active` says it
+    /// acts.
+    pub gradient: bool,
+    /// Reads the sample's pre-integrated importance ι (and refraction ν),
+    /// likewise only where `ENH_active`.
+    pub importance: bool,
+    /// Sets the sample's importance (up to 1, above the transfer
+    /// function's largest: MImDA's termination test allows for it).
+    pub sets_importance: bool,
+    /// Adds breaks to the ray (`add_break`): no segment straddles them.
+    pub breaks: bool,
+    /// Changes a segment's optics (`alpha_scale`, `alpha_mix`,
+    /// `color_scale`).
+    pub optics: bool,
+    /// Can make a ray show something where the transfer function has no
+    /// extinction. Such a kernel marches every ray through the volume's
+    /// box, with no tile culling or macrocell skipping; every other
+    /// enhancer keeps them (a segment with τ̄ = 0 then adds exactly nothing,
+    /// whatever the enhancer makes of it).
+    pub adds_opacity: bool,
+}
+
+/// Every enhancer, indexed by [`EnhancerKind`].
+pub const ENHANCERS: [EnhancerSpec; 5] = [
+    EnhancerSpec {
+        kind: EnhancerKind::PassThrough,
+        name: "pass-through",
+        gradient: false,
+        importance: false,
+        sets_importance: false,
+        breaks: false,
+        optics: false,
+        adds_opacity: false,
+    },
+    EnhancerSpec {
+        kind: EnhancerKind::ClipPlane,
+        name: "clip-plane",
+        gradient: false,
+        importance: false,
+        sets_importance: false,
+        breaks: true,
+        optics: true,
+        // The emphasis band blends towards full opacity only where τ̄ > 0.
+        adds_opacity: false,
+    },
+    EnhancerSpec {
+        kind: EnhancerKind::Probe,
+        name: "probe",
+        gradient: true,
+        importance: true,
+        sets_importance: false,
+        breaks: true,
+        optics: true,
+        // μ(α) and μ(i) are at most 1 (Eqs. 4–5).
+        adds_opacity: false,
+    },
+    EnhancerSpec {
+        kind: EnhancerKind::BandPicker,
+        name: "band-picker",
+        gradient: false,
+        // It sets the importance; it does not read it.
+        importance: false,
+        sets_importance: true,
+        breaks: false,
+        optics: true,
+        // Its factor on opacity is at most 1.
+        adds_opacity: false,
+    },
+    EnhancerSpec {
+        kind: EnhancerKind::ExitDirection,
+        name: "exit-direction",
+        gradient: false,
+        importance: false,
+        sets_importance: false,
+        breaks: false,
+        optics: false,
+        adds_opacity: true,
+    },
+];
+
 impl EnhancerKind {
-    pub const ALL: [EnhancerKind; 3] = [
+    pub const ALL: [EnhancerKind; 5] = [
         EnhancerKind::PassThrough,
         EnhancerKind::ClipPlane,
+        EnhancerKind::Probe,
+        EnhancerKind::BandPicker,
         EnhancerKind::ExitDirection,
     ];
 
+    /// The kind's declaration.
+    pub fn spec(self) -> &'static EnhancerSpec {
+        &ENHANCERS[self as usize]
+    }
+
     /// The WGSL file of the enhancer, in `shaders/enhancers/`.
     pub fn file(self) -> &'static str {
-        match self {
-            EnhancerKind::PassThrough => "pass-through",
-            EnhancerKind::ClipPlane => "clip-plane",
-            EnhancerKind::ExitDirection => "exit-direction",
-        }
+        self.spec().name
     }
+}
+
+/// What packing a tool's parameters for the kernel needs to know of the
+/// frame: where the volume is and how steep its data can be.
+#[derive(Clone, Copy, Debug)]
+pub struct PackContext {
+    pub placement: Placement,
+    /// The volume's extent (data length units).
+    pub extent: [f64; 3],
+    /// ∇_max of G10 Eq. 5's η: the transfer function's value span over the
+    /// finest voxel (the steepest a change across one voxel can be), in
+    /// data values per data length unit.
+    pub gradient_max: f64,
 }
 
 impl Tool {
@@ -149,37 +353,167 @@ impl Tool {
         match self {
             Tool::PassThrough => EnhancerKind::PassThrough,
             Tool::ClipPlane(_) => EnhancerKind::ClipPlane,
+            Tool::Probe(_) => EnhancerKind::Probe,
+            Tool::BandPicker(_) => EnhancerKind::BandPicker,
             Tool::ExitDirection => EnhancerKind::ExitDirection,
+        }
+    }
+
+    /// The tool's constant state as the kernel reads it (`ToolParams`:
+    /// four vec4, meaning per enhancer, written in its WGSL file's header).
+    pub fn pack(&self, ctx: &PackContext) -> [[f32; 4]; 4] {
+        let f = |x: f64| x as f32;
+        match self {
+            Tool::PassThrough | Tool::ExitDirection => [[0.0; 4]; 4],
+            Tool::ClipPlane(c) => {
+                let v = c.in_volume(&ctx.placement, ctx.extent);
+                [
+                    [f(v.normal.x), f(v.normal.y), f(v.normal.z), f(v.offset)],
+                    [f(v.unit.x), f(v.unit.y), f(v.unit.z), f(c.thickness)],
+                    [f(c.context[0]), f(c.context[1]), 0.0, 0.0],
+                    [0.0; 4],
+                ]
+            }
+            Tool::Probe(p) => {
+                let k = ctx.placement.scale(ctx.extent);
+                let rt = ctx.placement.rotation().transpose();
+                let centre = rt * (DVec3::from(p.center) - DVec3::from(ctx.placement.center)) / k
+                    + DVec3::from(ctx.extent) * 0.5;
+                let axis = rt * DVec3::from(p.axis).normalize();
+                [
+                    [f(centre.x), f(centre.y), f(centre.z), f(p.radius / k)],
+                    [
+                        f(axis.x),
+                        f(axis.y),
+                        f(axis.z),
+                        f(ctx.gradient_max.max(1e-30)),
+                    ],
+                    [
+                        f(p.alignment[0]),
+                        f(p.alignment[1]),
+                        f(p.gradient[0]),
+                        f(p.gradient[1]),
+                    ],
+                    [0.0; 4],
+                ]
+            }
+            Tool::BandPicker(b) => {
+                let axis = ctx.placement.rotation().transpose() * DVec3::from(b.axis).normalize();
+                [
+                    b.band.map(f),
+                    [f(axis.x), f(axis.y), f(axis.z), 0.0],
+                    [f(b.alignment[0]), f(b.alignment[1]), 0.0, 0.0],
+                    [0.0; 4],
+                ]
+            }
+        }
+    }
+
+    /// Where the tool's enhancer acts and reads the gradient or importance
+    /// (`ENH_active`), as a box in volume space (data length units): the
+    /// kernel computes those inputs only in the tiles whose rays can meet
+    /// it (`None`: nowhere, or for an enhancer that reads them and declares
+    /// no region, the whole volume).
+    pub fn region(&self, ctx: &PackContext) -> Option<[[f64; 3]; 2]> {
+        match self {
+            Tool::Probe(p) => {
+                let [a, ..] = self.pack(ctx);
+                let r = p.radius / ctx.placement.scale(ctx.extent);
+                let c = DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
+                Some([(c - r).to_array(), (c + r).to_array()])
+            }
+            t if t.enhancer().spec().gradient || t.enhancer().spec().importance => {
+                Some([[0.0; 3], ctx.extent])
+            }
+            _ => None,
+        }
+    }
+
+    /// Whether the tool can change anything in the volume's box: a clip
+    /// plane whose cut-away side and band miss the box, or a probe whose
+    /// sphere misses it, changes no ray (its breaks fall outside the box,
+    /// where a ray integrates nothing), and the renderer leaves it out of
+    /// the kernel.
+    pub fn acts_on(&self, ctx: &PackContext) -> bool {
+        let corners = (0..8).map(|i| {
+            DVec3::new(
+                if i & 1 == 0 { 0.0 } else { ctx.extent[0] },
+                if i & 2 == 0 { 0.0 } else { ctx.extent[1] },
+                if i & 4 == 0 { 0.0 } else { ctx.extent[2] },
+            )
+        });
+        match self {
+            Tool::ClipPlane(c) => {
+                let v = c.in_volume(&ctx.placement, ctx.extent);
+                corners
+                    .map(|q| v.normal.dot(q) + v.offset)
+                    .fold(f64::NEG_INFINITY, f64::max)
+                    > -c.thickness
+            }
+            Tool::Probe(_) => match self.region(ctx) {
+                Some([lo, hi]) => {
+                    let r = (hi[0] - lo[0]) / 2.0;
+                    let c = (DVec3::from(lo) + DVec3::from(hi)) / 2.0;
+                    let nearest = c.clamp(DVec3::ZERO, DVec3::from(ctx.extent));
+                    (nearest - c).length() < r
+                }
+                None => true,
+            },
+            Tool::PassThrough | Tool::BandPicker(_) | Tool::ExitDirection => true,
         }
     }
 
     /// Checks a tool's parameters; `what` names the file and the table.
     pub fn check(&self, what: &str) -> Result<()> {
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        let direction = |v: &[f64; 3], field: &str| -> Result<()> {
+            if !finite(v) || DVec3::from(*v).length() < 1e-12 {
+                bail!("{what}: {field} must be a finite non-zero vector (got {v:?})");
+            }
+            Ok(())
+        };
+        let band = |b: &[f64; 2], field: &str, names: &str| -> Result<()> {
+            let [lo, hi] = *b;
+            if !(finite(b) && (0.0..=1.0).contains(&lo) && lo < hi && hi <= 1.0) {
+                bail!("{what}: {field} must be [{names}] with 0 ≤ lo < hi ≤ 1 (got {b:?})");
+            }
+            Ok(())
+        };
         match self {
             Tool::PassThrough | Tool::ExitDirection => Ok(()),
             Tool::ClipPlane(c) => {
-                let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
                 if !finite(&c.point) {
                     bail!("{what}: point must be finite (got {:?})", c.point);
                 }
-                let n = DVec3::from(c.normal);
-                if !finite(&c.normal) || n.length() < 1e-12 {
-                    bail!(
-                        "{what}: normal must be a finite non-zero vector (got {:?})",
-                        c.normal
-                    );
-                }
+                direction(&c.normal, "normal")?;
                 if !(c.thickness.is_finite() && c.thickness >= 0.0) {
                     bail!("{what}: thickness must be ≥ 0 (got {})", c.thickness);
                 }
-                let [lo, hi] = c.context;
-                if !(finite(&c.context) && (0.0..=1.0).contains(&lo) && lo < hi && hi <= 1.0) {
+                band(&c.context, "context", "f_l, f_h")
+            }
+            Tool::Probe(p) => {
+                if !finite(&p.center) || p.center.iter().any(|x| x.abs() > 10.0) {
                     bail!(
-                        "{what}: context must be [f_l, f_h] with 0 ≤ f_l < f_h ≤ 1 (got {:?})",
-                        c.context
+                        "{what}: center must be finite and within 10 m (got {:?})",
+                        p.center
                     );
                 }
-                Ok(())
+                if !(p.radius.is_finite() && p.radius > 0.0 && p.radius <= 10.0) {
+                    bail!("{what}: radius must be in (0, 10] m (got {})", p.radius);
+                }
+                direction(&p.axis, "axis")?;
+                band(&p.alignment, "alignment", "a_l, a_h")?;
+                band(&p.gradient, "gradient", "g_l, g_h")
+            }
+            Tool::BandPicker(b) => {
+                let v = b.band;
+                if !(finite(&v) && v[0] <= v[1] && v[1] <= v[2] && v[2] <= v[3] && v[0] < v[3]) {
+                    bail!(
+                        "{what}: band must be four ordered finite data values b0 ≤ b1 ≤ b2 ≤ b3 with b0 < b3 (got {v:?})"
+                    );
+                }
+                direction(&b.axis, "axis")?;
+                band(&b.alignment, "alignment", "a_l, a_h")
             }
         }
     }

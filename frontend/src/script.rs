@@ -110,6 +110,12 @@ pub struct ToolKey {
     pub thickness: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub context: Option<[f64; 2]>,
+    /// A probe's radius (m); its centre is keyed as `point`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
+    /// A probe's axis.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub axis: Option<[f64; 3]>,
 }
 
 /// The keyframed pose and parameters of one tool.
@@ -119,6 +125,8 @@ struct ToolTracks {
     normal: Track<3>,
     thickness: Track<1>,
     context: Track<2>,
+    radius: Track<1>,
+    axis: Track<3>,
 }
 
 /// One numeric track: (frame, value) keys in frame order.
@@ -281,6 +289,19 @@ impl Script {
                     finite("context", &c)?;
                     tr.context.keys.push((k.frame, c));
                 }
+                if let Some(r) = t.radius {
+                    if !(r.is_finite() && r > 0.0) {
+                        bail!("{at}: radius must be > 0 (got {r})");
+                    }
+                    tr.radius.keys.push((k.frame, [r]));
+                }
+                if let Some(a) = t.axis {
+                    finite("axis", &a)?;
+                    if a.iter().map(|x| x * x).sum::<f64>() < 1e-24 {
+                        bail!("{at}: axis must be non-zero");
+                    }
+                    tr.axis.keys.push((k.frame, a));
+                }
             }
             if let Some(t) = &k.transfer_function {
                 let p = if t.is_absolute() {
@@ -323,20 +344,33 @@ impl Script {
         }
         let mut out = scene.to_vec();
         for (i, (t, tr)) in out.iter_mut().zip(&self.tools).enumerate() {
+            let plane_keys = !(tr.normal.keys.is_empty()
+                && tr.thickness.keys.is_empty()
+                && tr.context.keys.is_empty());
+            let probe_keys = !(tr.radius.keys.is_empty() && tr.axis.keys.is_empty());
             match t {
-                Tool::ClipPlane(c) => {
+                Tool::ClipPlane(c) if !probe_keys => {
                     c.point = tr.point.at(frame, c.point);
                     c.normal = tr.normal.at(frame, c.normal);
                     c.thickness = tr.thickness.at(frame, [c.thickness])[0];
                     c.context = tr.context.at(frame, c.context);
                 }
+                Tool::Probe(p) if !plane_keys => {
+                    p.center = tr.point.at(frame, p.center);
+                    p.radius = tr.radius.at(frame, [p.radius])[0];
+                    p.axis = tr.axis.at(frame, p.axis);
+                }
+                Tool::BandPicker(b)
+                    if !plane_keys && tr.point.keys.is_empty() && tr.radius.keys.is_empty() =>
+                {
+                    b.axis = tr.axis.at(frame, b.axis);
+                }
                 _ => {
-                    let keyed = !(tr.point.keys.is_empty()
-                        && tr.normal.keys.is_empty()
-                        && tr.thickness.keys.is_empty()
-                        && tr.context.keys.is_empty());
-                    if keyed {
-                        bail!("{}: tool {i}: this kind of tool has no pose", self.name);
+                    if plane_keys || probe_keys || !tr.point.keys.is_empty() {
+                        bail!(
+                            "{}: tool {i}: keys this kind of tool does not have (a clip plane: point, normal, thickness, context; a probe: point, radius, axis; a band picker: axis)",
+                            self.name
+                        );
                     }
                 }
             }
@@ -466,5 +500,40 @@ mod tool_tests {
         assert_eq!(s.gamma(50, 0.3), 1.0);
         // A key for a tool the scene does not have.
         assert!(s.tools(0, &[]).unwrap_err().to_string().contains("s.toml"));
+    }
+
+    #[test]
+    fn a_probe_is_keyframed_and_plane_keys_on_it_are_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("s.toml");
+        std::fs::write(
+            &p,
+            "[[key]]\nframe = 0\ntool = [{ index = 0, point = [0, 0, 0], radius = 0.02 }]\n\
+             [[key]]\nframe = 10\ntool = [{ index = 0, point = [0.1, 0, 0], radius = 0.04, axis = [1, 0, 0] }]\n",
+        )
+        .unwrap();
+        let s = Script::load(&p).unwrap();
+        let scene = vec![Tool::Probe(parallax_common::tools::Probe::new(
+            [0.0; 3], 0.05,
+        ))];
+        let t = s.tools(5, &scene).unwrap();
+        let Tool::Probe(probe) = t[0] else { panic!() };
+        assert!((probe.center[0] - 0.05).abs() < 1e-12);
+        assert!((probe.radius - 0.03).abs() < 1e-12);
+        assert_eq!(probe.axis, [1.0, 0.0, 0.0]); // its only key, held before it
+        std::fs::write(
+            &p,
+            "[[key]]\nframe = 0\ntool = [{ index = 0, normal = [0, 0, 1] }]\n",
+        )
+        .unwrap();
+        let e = Script::load(&p)
+            .unwrap()
+            .tools(0, &scene)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("s.toml: tool 0") && e.contains("probe: point, radius, axis"),
+            "{e}"
+        );
     }
 }

@@ -12,12 +12,14 @@ var<private> ENH_mu: f32;
 
 // At ray start (and after a change of direction): μ depends only on the
 // ray's direction; the plane and the band's far side become breaks, so no
-// segment straddles them.
+// segment straddles them. A ray for which the plane changes nothing (μ = 1
+// and no band) gets no break: its samples, and its pixel, are those of no
+// plane.
 fn ENH_start(ray: ptr<function, Ray>) {
     let tp = tools[ENH_INDEX];
     ENH_mu = smoothstep(tp.c.x, tp.c.y, 1.0 - max(0.0, -dot(tp.b.xyz, (*ray).dir)));
     let nd = dot(tp.a.xyz, (*ray).dir);
-    if (abs(nd) > 1e-30) {
+    if (abs(nd) > 1e-30 && (ENH_mu < 1.0 || tp.b.w > 0.0)) {
         let d0 = dot(tp.a.xyz, (*ray).origin) + tp.a.w;
         add_break(ray, -d0 / nd);
         if (tp.b.w > 0.0) {

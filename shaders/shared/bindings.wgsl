@@ -45,7 +45,7 @@ struct GpuFrame {
     tf_mids: vec4<u32>,   // offset of the bin midpoint values in a table part, 0, 0, 0
     lod: vec4<f32>,       // multilevel sampling: accuracy (pixels per voxel), light field s0 (m), tan(Φ/2), light field (1) or not (0)
     splits: vec4<u32>,    // per axis, the levels that halve it (bit l: level l against l − 1), 0
-    dispatch: vec4<u32>,  // tiles this dispatch runs; first texel of the index, of the tiles in `frame_table`; 0
+    dispatch: vec4<u32>,  // tiles listed; first texel of the index, of the tiles in `frame_table`; tiles that meet a tool's region (listed first)
     recip: vec4<f32>,     // 1 / the pool's texels along x, y, z; 1 / the table's bin width
     grid: vec4<f32>,      // 2D table: nodes per data unit, n − 1, 1 / n, 0 (products, not quotients, per sample)
 }
@@ -171,6 +171,13 @@ fn node_values(i: u32) -> vec2<f32> {
 
 // The 8×8 tile workgroup `w` runs: (view, tile x | tile y << 16)
 // (backend/src/raycast/tiles.rs), two a texel.
+// The pipeline for the tiles that can meet a tool's region: the first
+// frame.dispatch.w listed tiles (backend/src/raycast/tiles.rs
+// `flag_regions`); the other pipeline runs the rest, with everything the
+// enhancers read there compiled out (a CPU device runs the body of every
+// branch for all lanes, taken or not).
+override TOOL_TILES: bool = false;
+
 fn tile_at(w: u32) -> vec2<u32> {
     let t = texel_at(frame_table, frame.dispatch.z + (w >> 1u));
     return select(t.xy, t.zw, (w & 1u) == 1u);

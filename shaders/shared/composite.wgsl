@@ -12,8 +12,8 @@ struct Acc {
 
 // Premultiplied colour and opacity of a segment: α = 1 − exp(−τ̄·d) and
 // colour k̃·α/τ̄ (G10 §4), times the shading factor. Tools scale the opacity
-// (and colour with it) and may blend towards full opacity, keeping the
-// material's own colour k̃/τ̄.
+// (and colour with it), may scale the colour alone, and may blend towards
+// full opacity, keeping the material's own colour k̃/τ̄.
 fn segment_optics(smp: Sample, shade: f32) -> vec4<f32> {
     let x = max(smp.tau, 0.0) * smp.len;
     var a: f32;
@@ -28,7 +28,7 @@ fn segment_optics(smp: Sample, shade: f32) -> vec4<f32> {
     var c = max(smp.emission, vec3<f32>(0.0)) * w * shade;
     if (MODIFIES_OPTICS) {
         a = a * smp.alpha_scale;
-        c = c * smp.alpha_scale;
+        c = c * (smp.alpha_scale * smp.color_scale);
         if (smp.alpha_mix > 0.0) {
             let chroma = max(smp.emission, vec3<f32>(0.0)) / max(smp.tau, 1e-30);
             a = mix(a, 1.0, smp.alpha_mix);

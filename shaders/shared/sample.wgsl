@@ -9,18 +9,22 @@ struct Sample {
     len: f32,             // segment length d (data units)
     dir: vec3<f32>,       // ray direction, volume space, unit
     scalar: f32,          // s at the segment's end
+    scalar_prev: f32,     // s at its start
     gradient: vec3<f32>,  // ∇s at the midpoint (computed when an enhancer reads it)
     tau: f32,             // pre-integrated extinction τ̄
     emission: vec3<f32>,  // pre-integrated extinction-weighted colour k̃
     importance: f32,      // pre-integrated importance ι (MImDA, refraction kernels)
     refraction: f32,      // pre-integrated refraction index ν (idem)
     alpha_scale: f32,     // opacity multiplier set by tools (1: none)
-    alpha_mix: f32,       // blend towards full opacity set by tools (0: none)
+    alpha_mix: f32,       // blend towards full opacity set by tools (0: none; only where τ̄ > 0)
+    color_scale: f32,     // colour multiplier set by tools (1: none; G10 Eq. 5's μ(i))
     material: vec4<f32>,  // Phong ka, kd, ks, shininess
 }
 
+// Breaks of a ray: three per enhancer at most (the probe's sphere and its
+// centre plane).
+const MAX_BREAKS: u32 = 9u;
 // The ray: where it starts and goes since its last change of direction.
-const MAX_BREAKS: u32 = 6u;
 struct Ray {
     origin: vec3<f32>,    // volume space
     t_end: f32,           // where it leaves the volume's box
@@ -28,7 +32,7 @@ struct Ray {
     n_breaks: u32,
     // Parameters along the ray where a segment must end (a tool's plane):
     // no segment straddles them, so a tool acts exactly on its side.
-    breaks: array<f32, 6>,
+    breaks: array<f32, 9>,
 }
 
 fn add_break(ray: ptr<function, Ray>, t: f32) {

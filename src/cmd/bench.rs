@@ -55,6 +55,30 @@ enum Study {
         #[arg(long)]
         kernels_only: bool,
     },
+    /// What each tool and stepper costs against no tool, placed where it
+    /// changes nothing (its image must be no tool's, bit for bit) and in
+    /// place, at the default settings, for each transfer function
+    /// (DIR/tools.csv).
+    Tools {
+        /// A volume file.
+        #[arg(long, default_value = "/usr/share/mricron/templates/ch2.nii.gz")]
+        volume: PathBuf,
+        /// Transfer function files.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "configs/tf/colin27-skin.toml,configs/tf/colin27-brain.toml"
+        )]
+        tf: Vec<PathBuf>,
+        /// Image size WxH.
+        #[arg(long, default_value = "512x384", value_parser = args::size::<u32>)]
+        size: [u32; 2],
+        /// Timed rounds (the median is reported).
+        #[arg(long, default_value_t = 7)]
+        rounds: usize,
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+    },
     /// The brick codecs on these volumes: ratio, encode and decode speed of
     /// each candidate (DIR/codecs.csv).
     Codecs {
@@ -108,6 +132,13 @@ pub fn run(a: Args) -> Result<()> {
             repeats,
             kernels_only,
         } => sweep(&inputs, repeats, kernels_only),
+        Study::Tools {
+            volume,
+            tf,
+            size,
+            rounds,
+            out,
+        } => tools(&volume, &tf, size, rounds, &out),
         Study::Codecs {
             volumes,
             quantize,
@@ -147,6 +178,45 @@ pub fn run(a: Args) -> Result<()> {
             wrote(&out, "seams.csv")
         }
     }
+}
+
+fn tools(volume: &Path, tfs: &[PathBuf], size: [u32; 2], rounds: usize, out: &Path) -> Result<()> {
+    use parallax_common::camera::{Placement, View};
+    parallax_bench::measure::create_out(out)?;
+    let db = out.join("tools.pxo");
+    parallax_backend::store::import(
+        data::open(volume, None)?.as_mut(),
+        &db,
+        &volume.display().to_string(),
+        &Default::default(),
+    )?;
+    // Colin27 upright, face to the viewer, 25 cm tall, on a desktop window.
+    let placement = Placement {
+        center: [0.0; 3],
+        rotation_deg: [-90.0, 180.0, 0.0],
+        size: 0.25,
+    };
+    let aspect = size[1] as f64 / size[0] as f64;
+    let view = View::window(size, [0.3, 0.3 * aspect], [0.0, 0.0, 0.8]);
+    let cfg = parallax_common::config::RenderConfig::default();
+    let mut points = Vec::new();
+    for tf_path in tfs {
+        let tf = parallax_common::tf::TransferFunction::load(tf_path)?;
+        let name = tf_path
+            .file_stem()
+            .map_or("tf".into(), |s| s.to_string_lossy().into_owned());
+        let shot = parallax_bench::measure::Shot {
+            db: &db,
+            tf: &tf,
+            placement: &placement,
+            view: &view,
+        };
+        let p = parallax_bench::tools::run(shot, &name, &cfg, rounds)?;
+        parallax_bench::tools::print(&p);
+        points.extend(p);
+    }
+    parallax_bench::tools::write_csv(&out.join("tools.csv"), &points)?;
+    wrote(out, "tools.csv")
 }
 
 fn sequence_of(inputs: &Inputs, script: &Path, frames: usize) -> Result<Sequence> {

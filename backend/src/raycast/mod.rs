@@ -71,7 +71,7 @@ pub struct Raycaster {
     /// One pipeline per combination of stepper, enhancers and shading that
     /// a frame has used (G10 §5: a kernel specialised for what the scene
     /// uses), built when first needed.
-    pipelines: HashMap<(KernelKey, [bool; 10], u32), wgpu::ComputePipeline>,
+    pipelines: HashMap<(KernelKey, [bool; 11], u32), wgpu::ComputePipeline>,
     /// The pool holds f32 values (else 8-bit codes).
     float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
@@ -187,15 +187,29 @@ impl Raycaster {
         }
         let tiles_start = std::time::Instant::now();
         let cull = self.cull(inputs);
-        let tiles = tiles::tiles(views, scene, index, cull, settings.subframe.is_some());
+        let mut tiles = tiles::tiles(views, scene, index, cull, settings.subframe.is_some());
+        let tool_tiles = tiles::flag_regions(
+            &mut tiles,
+            views,
+            scene,
+            &settings.tool_regions,
+            settings.subframe.is_some(),
+        );
         let tiles_seconds = tiles_start.elapsed().as_secs_f64();
-        let (rows, prediction_reset) = self.upload(gpu, inputs, &gviews, &tiles, img_size)?;
-        let pipeline = self.kernel(gpu, inputs)?.clone();
+        let (rows, prediction_reset) =
+            self.upload(gpu, inputs, &gviews, &tiles, tool_tiles, img_size)?;
+        let pipeline = self.kernel(gpu, inputs, false)?.clone();
+        let tool_pipeline = match tool_tiles {
+            0 => None,
+            _ => Some(self.kernel(gpu, inputs, true)?.clone()),
+        };
         let fb_size = index.len() as u64 * 4;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
-        self.encode_rays(
-            &mut enc, &pipeline, rows, &tiles, img_size, fb_size, settings,
-        );
+        let passes = [
+            (tool_pipeline.as_ref(), tool_tiles),
+            (Some(&pipeline), tiles.len() - tool_tiles),
+        ];
+        self.encode_rays(&mut enc, &passes, rows, img_size, fb_size, settings);
         if let (Some(k), Some(reset)) = (settings.subframe, settings.reconstruct) {
             self.encode_reconstruction(gpu, &mut enc, views, k, reset)?;
         }
@@ -224,15 +238,16 @@ impl Raycaster {
         Ok(rendered)
     }
 
-    /// Which tiles the dispatch runs: a plain kernel adds nothing where a
-    /// ray meets no leaf with data (or, with macrocells, no cell with data);
-    /// the others (enhancers that draw on every ray, refraction) need every
-    /// ray through the volume's box. Multilevel sampling blends a leaf's
+    /// Which tiles the dispatch runs: a kernel that skips empty space adds
+    /// nothing where a ray meets no leaf with data (or, with macrocells, no
+    /// cell with data), whatever its tools; the others (enhancers that add
+    /// opacity, refraction, the isosurface) need every ray through the
+    /// volume's box. Multilevel sampling blends a leaf's
     /// parent and grandparent into its samples, so its own empty cells do
     /// not bound what a ray meets there: leaves, not cells.
     fn cull<'a>(&self, inputs: &RenderInputs<'a>) -> tiles::Cull<'a> {
         let s = inputs.settings;
-        let plain = s.kernel.is_plain();
+        let plain = s.kernel.skips_empty_space();
         let macrocells = s.macrocells && plain && inputs.pool.cells.per_axis > 0;
         let multilevel = s.multilevel.is_some() && !s.kernel.iso;
         match (plain, macrocells && !multilevel) {
@@ -253,6 +268,7 @@ impl Raycaster {
         inputs: &RenderInputs,
         gviews: &[GpuView],
         tiles: &[[u32; 2]],
+        tool_tiles: usize,
         img_size: u64,
     ) -> Result<(usize, bool)> {
         let RenderInputs {
@@ -272,7 +288,12 @@ impl Raycaster {
                 table.texels.len()
             );
         }
-        frame.dispatch = [tiles.len() as u32, table.index, table.tiles, 0];
+        frame.dispatch = [
+            tiles.len() as u32,
+            table.index,
+            table.tiles,
+            tool_tiles as u32,
+        ];
         self.frame
             .fit(gpu, table.texels.len() as u64, index.len() as u64, img_size);
         // A prediction buffer just made holds nothing: traverse fully.
@@ -311,12 +332,19 @@ impl Raycaster {
     /// The kernel this frame runs: the closed form's pieces where the
     /// kernel uses it, else the 2D table where asked for and filterable,
     /// else the exact table.
-    fn kernel(&mut self, gpu: &Gpu, inputs: &RenderInputs) -> Result<&wgpu::ComputePipeline> {
+    /// `tool_tiles`: the variant for the tiles that meet a tool's region
+    /// (`TOOL_TILES`).
+    fn kernel(
+        &mut self,
+        gpu: &Gpu,
+        inputs: &RenderInputs,
+        tool_tiles: bool,
+    ) -> Result<&wgpu::ComputePipeline> {
         let RenderInputs {
             pool, tf, settings, ..
         } = *inputs;
         let k = &settings.kernel;
-        let macrocells = settings.macrocells && k.is_plain() && pool.cells.per_axis > 0;
+        let macrocells = settings.macrocells && k.skips_empty_space() && pool.cells.per_axis > 0;
         let closed_pieces = tf
             .closed_pieces
             .filter(|_| settings.preintegration == Preintegration::Analytic && !k.iso);
@@ -340,6 +368,7 @@ impl Raycaster {
                 grid,
                 closed,
                 lookahead,
+                tool_tiles,
             ],
             closed_pieces.unwrap_or(0),
         )
@@ -347,14 +376,15 @@ impl Raycaster {
 
     /// The table's copy, one zeroing of the visibility feedback for all
     /// views (G10 §5), the image's zeroing (pixels of the tiles left out
-    /// stay zero) and the one dispatch over the listed tiles.
-    #[allow(clippy::too_many_arguments)]
+    /// stay zero) and the dispatches over the listed tiles: the tiles that
+    /// meet a tool's region with the kernel that computes what its
+    /// enhancers read, then the others (`passes`: each pipeline and its
+    /// count of tiles, in the list's order).
     fn encode_rays(
         &self,
         enc: &mut wgpu::CommandEncoder,
-        pipeline: &wgpu::ComputePipeline,
+        passes: &[(Option<&wgpu::ComputePipeline>, usize); 2],
         rows: usize,
-        tiles: &[[u32; 2]],
         img_size: u64,
         fb_size: u64,
         settings: &RenderSettings,
@@ -368,11 +398,14 @@ impl Raycaster {
             enc.clear_buffer(&fr.counters, 0, None);
         }
         enc.clear_buffer(&fr.image.buffer, 0, Some(img_size));
-        if !tiles.is_empty() {
+        for &(pipeline, n) in passes {
+            let Some(pipeline) = pipeline.filter(|_| n > 0) else {
+                continue;
+            };
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, bind, &[]);
-            let n = tiles.len() as u32;
+            let n = n as u32;
             pass.dispatch_workgroups(
                 n.min(tiles::TILES_PER_ROW),
                 n.div_ceil(tiles::TILES_PER_ROW),

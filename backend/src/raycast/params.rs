@@ -59,8 +59,9 @@ pub struct GpuFrame {
     /// The octree's split masks per axis (`OctreeLayout::splits`: bit l set
     /// where level l halves the axis), 0.
     pub splits: [u32; 4],
-    /// Tiles listed for this dispatch (`tiles`), first texel of the index
-    /// and of the tiles in the frame table, 0.
+    /// Tiles listed (`tiles`), first texel of the index and of the tiles
+    /// in the frame table, and how many of the tiles (listed first) meet a
+    /// tool's region (`tiles::flag_regions`).
     pub dispatch: [u32; 4],
     /// 1 / the pool's texels along x, y, z; 1 / the table's bin width.
     pub recip: [f32; 4],

@@ -11,10 +11,10 @@ impl Raycaster {
         &mut self,
         gpu: &Gpu,
         kernel: &KernelKey,
-        flags: [bool; 10],
+        flags: [bool; 11],
         tf_pieces: u32,
     ) -> Result<&wgpu::ComputePipeline> {
-        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint, grid_preint, analytic_preint, lookahead] =
+        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint, grid_preint, analytic_preint, lookahead, tool_tiles] =
             flags;
         let key = (kernel.clone(), flags, tf_pieces);
         if !self.pipelines.contains_key(&key) {
@@ -48,6 +48,9 @@ impl Raycaster {
                 // fetch, or with the closed form, where it overlaps the
                 // arithmetic (docs/performance.md, "Kernel changes on a CPU device").
                 ("LOOKAHEAD", flag(lookahead)),
+                // The variant for the tiles that meet a tool's region: only
+                // it computes what the enhancers read (`tiles::flag_regions`).
+                ("TOOL_TILES", flag(tool_tiles)),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
                 (

@@ -31,6 +31,11 @@ pub struct RenderSettings {
     pub predict: [f32; 4],
     /// The enhancers' constant parameters, in chain order.
     pub tools: [ToolParams; MAX_ENHANCERS],
+    /// Boxes (volume space) where an enhancer reads the gradient or the
+    /// importance ([`Tool::region`](parallax_common::tools::Tool::region)):
+    /// the tiles whose rays can meet one are flagged for the kernel, and
+    /// only there does it compute those inputs.
+    pub tool_regions: Vec<[[f64; 3]; 2]>,
     /// Step over empty macrocells (L12 §4.1) where the kernel allows it
     /// (plain DVR: no enhancer, MImDA, refraction or isosurface, which may
     /// act where τ = 0).
@@ -86,6 +91,7 @@ impl Default for RenderSettings {
             reconstruct: None,
             predict: [0.0; 4],
             tools: [ToolParams::default(); MAX_ENHANCERS],
+            tool_regions: Vec::new(),
             macrocells: true,
             count_samples: false,
             adaptive_step: false,

@@ -14,7 +14,7 @@
 //! Rust mirrors of GPU structs against naga's layout.
 
 use anyhow::{bail, Context, Result};
-use parallax_common::tools::{EnhancerKind, MAX_ENHANCERS};
+use parallax_common::tools::{EnhancerKind, EnhancerSpec, MAX_ENHANCERS};
 use std::fmt::Write;
 use std::path::Path;
 
@@ -56,16 +56,41 @@ pub const MODULES: &[(&str, &str)] = &[
     ),
 ];
 
-/// The enhancers, by kind: templates whose `ENH_` names and `ENH_INDEX`
-/// are replaced per instance.
+/// The enhancers' WGSL files, by the name their [`EnhancerSpec`] declares:
+/// templates whose `ENH_` names and `ENH_INDEX` are replaced per instance.
+/// An enhancer that reads the gradient or the importance also defines
+/// `ENH_active(smp) -> bool`, where it acts: the kernel computes those
+/// inputs only there.
+const ENHANCER_FILES: &[(&str, &str)] = &[
+    (
+        "pass-through",
+        include_str!("../../../shaders/enhancers/pass-through.wgsl"),
+    ),
+    (
+        "clip-plane",
+        include_str!("../../../shaders/enhancers/clip-plane.wgsl"),
+    ),
+    (
+        "probe",
+        include_str!("../../../shaders/enhancers/probe.wgsl"),
+    ),
+    (
+        "band-picker",
+        include_str!("../../../shaders/enhancers/band-picker.wgsl"),
+    ),
+    (
+        "exit-direction",
+        include_str!("../../../shaders/enhancers/exit-direction.wgsl"),
+    ),
+];
+
 fn enhancer_source(kind: EnhancerKind) -> &'static str {
-    match kind {
-        EnhancerKind::PassThrough => include_str!("../../../shaders/enhancers/pass-through.wgsl"),
-        EnhancerKind::ClipPlane => include_str!("../../../shaders/enhancers/clip-plane.wgsl"),
-        EnhancerKind::ExitDirection => {
-            include_str!("../../../shaders/enhancers/exit-direction.wgsl")
-        }
-    }
+    let name = kind.spec().name;
+    ENHANCER_FILES
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, src)| *src)
+        .unwrap_or_else(|| panic!("shaders/enhancers/{name}.wgsl is not in ENHANCER_FILES"))
 }
 
 const KERNEL: &str = include_str!("../../../shaders/raycast.wgsl");
@@ -86,6 +111,7 @@ pub const OVERRIDES: &[&str] = &[
     "ANALYTIC_PREINT",
     "TF_PIECES",
     "LOOKAHEAD",
+    "TOOL_TILES",
 ];
 
 /// One specialised kernel: the stepper and the enhancer chain.
@@ -121,10 +147,46 @@ impl KernelKey {
             chains.extend(next.iter().cloned());
             last = next;
         }
+        Self::with_steppers(&chains)
+    }
+
+    /// The combinations the naga test compiles: every stepper with no
+    /// enhancer, each kind alone and each kind filling the chain, and with
+    /// DVR and with MImDA and refraction every ordered pair of kinds. Each
+    /// enhancer is instantiated under its own names and meets the others
+    /// only through the chain's constants (the OR of their declarations)
+    /// and the order of calls, so the pairs meet every interaction of two
+    /// kinds and the full chains every slot, without the 4³ chains × 5
+    /// steppers of [`KernelKey::all`].
+    pub fn covering() -> Vec<KernelKey> {
+        let mut chains: Vec<Vec<EnhancerKind>> = vec![vec![]];
+        for k in EnhancerKind::ALL {
+            chains.push(vec![k]);
+            chains.push(vec![k; MAX_ENHANCERS]);
+        }
+        let mut out = Self::with_steppers(&chains);
+        for (mimda, refraction) in [(false, false), (true, true)] {
+            for a in EnhancerKind::ALL {
+                for b in EnhancerKind::ALL {
+                    out.push(KernelKey {
+                        mimda,
+                        refraction,
+                        iso: false,
+                        enhancers: vec![a, b],
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// DVR and MImDA, each with refraction off and on, and the isosurface,
+    /// with each of `chains`.
+    fn with_steppers(chains: &[Vec<EnhancerKind>]) -> Vec<KernelKey> {
         let mut out = Vec::new();
         for mimda in [false, true] {
             for refraction in [false, true] {
-                for e in &chains {
+                for e in chains {
                     out.push(KernelKey {
                         mimda,
                         refraction,
@@ -134,7 +196,7 @@ impl KernelKey {
                 }
             }
         }
-        for e in &chains {
+        for e in chains {
             out.push(KernelKey {
                 iso: true,
                 enhancers: e.clone(),
@@ -144,16 +206,19 @@ impl KernelKey {
         out
     }
 
-    /// Plain DVR: no MImDA, refraction or isosurface, and every enhancer a
-    /// pass-through. Such a kernel adds nothing where a ray meets no data.
-    pub fn is_plain(&self) -> bool {
-        !self.mimda
-            && !self.refraction
-            && !self.iso
-            && self
-                .enhancers
-                .iter()
-                .all(|&e| e == EnhancerKind::PassThrough)
+    /// The declarations of the chain's enhancers.
+    fn specs(&self) -> impl Iterator<Item = &'static EnhancerSpec> + '_ {
+        self.enhancers.iter().map(|k| k.spec())
+    }
+
+    /// Whether a segment with τ̄ = 0 adds exactly nothing to a ray, so that
+    /// the kernel may step over empty macrocells and leave out tiles whose
+    /// rays meet no data: DVR and MImDA (whose largest importance counts
+    /// only segments with extinction) with enhancers that add no opacity.
+    /// Refraction bends rays in empty space too, and the isosurface stepper
+    /// looks for its value, not for extinction.
+    pub fn skips_empty_space(&self) -> bool {
+        !self.refraction && !self.iso && self.specs().all(|s| !s.adds_opacity)
     }
 
     /// The `chain` module of this combination.
@@ -167,8 +232,7 @@ impl KernelKey {
         if self.iso && (self.mimda || self.refraction) {
             bail!("the isosurface stepper takes neither MImDA nor refraction");
         }
-        let has = |k: EnhancerKind| self.enhancers.contains(&k);
-        let clip = has(EnhancerKind::ClipPlane);
+        let any = |f: fn(&EnhancerSpec) -> bool| self.specs().any(f);
         let mut s = String::new();
         let _ = writeln!(
             s,
@@ -191,21 +255,24 @@ impl KernelKey {
         });
         s.push_str("#import iso\n");
         let _ = writeln!(s, "const ISO: bool = {};", self.iso);
-        let _ = writeln!(s, "const HAS_BREAKS: bool = {clip};");
-        let _ = writeln!(s, "const MODIFIES_OPTICS: bool = {clip};");
+        let _ = writeln!(s, "const HAS_BREAKS: bool = {};", any(|e| e.breaks));
+        let _ = writeln!(s, "const MODIFIES_OPTICS: bool = {};", any(|e| e.optics));
         let _ = writeln!(
             s,
             "const NEEDS_AUX: bool = {};",
             self.mimda || self.refraction
         );
         let _ = writeln!(s, "const REFRACTION: bool = {};", self.refraction);
-        // The gradient costs six samples: computed before the enhancers only
-        // when one of them reads it (shading computes its own otherwise).
-        let gradient = self
-            .enhancers
-            .iter()
-            .any(|&k| enhancer_source(k).contains(".gradient"));
-        let _ = writeln!(s, "const NEEDS_GRADIENT: bool = {gradient};");
+        // The gradient costs six samples and the importance a table read:
+        // computed before the enhancers only where one that reads them is
+        // active (shading computes its own gradient otherwise).
+        let _ = writeln!(s, "const NEEDS_GRADIENT: bool = {};", any(|e| e.gradient));
+        let _ = writeln!(s, "const TOOL_AUX: bool = {};", any(|e| e.importance));
+        let _ = writeln!(
+            s,
+            "const TOOL_IMPORTANCE: bool = {};",
+            any(|e| e.sets_importance)
+        );
         for (i, &k) in self.enhancers.iter().enumerate() {
             let text = enhancer_source(k)
                 .replace("ENH_INDEX", &format!("{i}u"))
@@ -217,6 +284,21 @@ impl KernelKey {
                 .map(|i| format!("    enh{i}_{stage}({args});\n"))
                 .collect()
         };
+        let active: Vec<String> = self
+            .specs()
+            .enumerate()
+            .filter(|(_, e)| e.gradient || e.importance)
+            .map(|(i, _)| format!("enh{i}_active(smp)"))
+            .collect();
+        let _ = writeln!(
+            s,
+            "fn chain_active(smp: ptr<function, Sample>) -> bool {{\n    return {};\n}}",
+            if active.is_empty() {
+                "false".to_string()
+            } else {
+                active.join(" || ")
+            }
+        );
         let _ = write!(
             s,
             "fn chain_start(ray: ptr<function, Ray>) {{\n{}}}\n\
@@ -318,16 +400,22 @@ mod tests {
         .unwrap_or_else(|e| panic!("{what}:\n{}", e.emit_to_string(src)))
     }
 
-    /// Every combination of stepper and enhancers a scene can ask for,
-    /// composed as its pipeline gets it, parses and validates; so do its
-    /// override values, specialised as the device would (all combinations
-    /// but in the last override, which meets each value of the others).
+    /// The covering combinations of stepper and enhancers
+    /// ([`KernelKey::covering`]), composed as their pipelines get them,
+    /// parse and validate; so do their override values, specialised as the
+    /// device would (all combinations but in the last override, which meets
+    /// each value of the others), for the empty and the full chains.
     #[test]
     fn every_kernel_combination_validates_without_a_gpu() {
-        let keys = KernelKey::all();
-        // (DVR/MImDA × refraction off/on, and the isosurface) × chains of
-        // 0–3 of 3 kinds.
-        assert_eq!(keys.len(), (2 * 2 + 1) * (1 + 3 + 9 + 27));
+        let keys = KernelKey::covering();
+        let kinds = EnhancerKind::ALL.len();
+        // (DVR/MImDA × refraction off/on, and the isosurface) × (no
+        // enhancer, each kind alone, each kind three times), and every
+        // ordered pair under two steppers.
+        assert_eq!(
+            keys.len(),
+            (2 * 2 + 1) * (1 + 2 * kinds) + 2 * kinds * kinds
+        );
         for key in &keys {
             let what = format!("{key:?}");
             let src = kernel(key).unwrap();
@@ -383,28 +471,47 @@ mod tests {
         }
     }
 
-    /// The path where an enhancer reads the gradient (none of today's does)
-    /// validates too.
+    /// The chain's constants follow from the enhancers' declarations: the
+    /// probe reads the gradient and importance where it is active, the clip
+    /// plane neither; only an enhancer that adds opacity costs the kernel
+    /// its skipping of empty space.
     #[test]
-    fn the_gradient_path_validates() {
-        let key = KernelKey {
-            enhancers: vec![EnhancerKind::ClipPlane],
+    fn declarations_set_the_chain_constants() {
+        let key = |e: Vec<EnhancerKind>| KernelKey {
+            enhancers: e,
             ..Default::default()
         };
-        let src = kernel(&key).unwrap();
-        assert!(src.contains("const NEEDS_GRADIENT: bool = false;"));
-        let src = src.replace(
-            "const NEEDS_GRADIENT: bool = false;",
-            "const NEEDS_GRADIENT: bool = true;",
-        );
-        validate("gradient", &src, &parse("gradient", &src));
+        let clip = key(vec![EnhancerKind::ClipPlane]).chain_module().unwrap();
+        assert!(clip.contains("const NEEDS_GRADIENT: bool = false;"));
+        assert!(clip.contains("const HAS_BREAKS: bool = true;"));
+        assert!(clip.contains("return false;"));
+        let probe = key(vec![EnhancerKind::PassThrough, EnhancerKind::Probe])
+            .chain_module()
+            .unwrap();
+        assert!(probe.contains("const NEEDS_GRADIENT: bool = true;"));
+        assert!(probe.contains("const TOOL_AUX: bool = true;"));
+        assert!(probe.contains("return enh1_active(smp);"));
+        assert!(key(vec![EnhancerKind::ClipPlane, EnhancerKind::Probe]).skips_empty_space());
+        assert!(!key(vec![EnhancerKind::ExitDirection]).skips_empty_space());
+        assert!(!KernelKey {
+            refraction: true,
+            ..Default::default()
+        }
+        .skips_empty_space());
+        // Every declared kind has its file, and the order of ENHANCERS is
+        // EnhancerKind's.
+        for (i, k) in EnhancerKind::ALL.iter().enumerate() {
+            assert_eq!(parallax_common::tools::ENHANCERS[i].kind, *k);
+            assert!(enhancer_source(*k).contains("fn ENH_sample("));
+        }
+        assert_eq!(ENHANCER_FILES.len(), EnhancerKind::ALL.len());
     }
 
     /// Every module and enhancer file is used by some combination (none can
     /// rot unseen), and a bad import is an error.
     #[test]
     fn every_module_is_used() {
-        let all: Vec<String> = KernelKey::all()
+        let all: Vec<String> = KernelKey::covering()
             .iter()
             .map(|k| kernel(k).unwrap())
             .collect();

@@ -228,6 +228,68 @@ fn tiles_in(
     out
 }
 
+/// Moves the tiles (of `tiles`, made for the same views) whose rays can
+/// meet one of `regions` (boxes in volume space) to the front, keeping the
+/// order within each part, and returns how many they are. Those run the
+/// kernel that computes what its enhancers read; the others run the same
+/// kernel with all of that compiled out (`TOOL_TILES`), since a CPU device
+/// runs the body of every branch for all lanes whether any takes it or not.
+pub fn flag_regions(
+    tiles: &mut Vec<[u32; 2]>,
+    views: &[View],
+    scene: &SceneGeometry,
+    regions: &[[[f64; 3]; 2]],
+    subframe: bool,
+) -> usize {
+    if regions.is_empty() {
+        return 0;
+    }
+    let map = VolumeMap::new(&scene.placement, scene.extent());
+    let px_per_tile = if subframe { 2 * TILE } else { TILE };
+    // Per view, the tile rectangles [x0, x1, y0, y1] the regions cover
+    // (None: every tile).
+    let rects: Vec<Option<Vec<[f64; 4]>>> = views
+        .iter()
+        .map(|v| {
+            let o = DVec3::from(v.observer);
+            regions
+                .iter()
+                // A region wholly behind the rays' origins (the observer's
+                // plane) meets no ray.
+                .filter(|[lo, hi]| {
+                    let corners = map.corners(DVec3::from(*lo), DVec3::from(*hi));
+                    !(o.z.abs() > 1e-12 && corners.iter().all(|p| p.z / o.z >= 1.0))
+                })
+                .map(|[lo, hi]| {
+                    let b = pixel_bounds(v, &map.corners(DVec3::from(*lo), DVec3::from(*hi)))?;
+                    let t = px_per_tile as f64;
+                    Some([
+                        (b[0] / t).floor(),
+                        (b[1] / t).floor(),
+                        (b[2] / t).floor(),
+                        (b[3] / t).floor(),
+                    ])
+                })
+                .collect()
+        })
+        .collect();
+    let meets = |t: &[u32; 2]| {
+        let (tx, ty) = ((t[1] & 0xFFFF) as f64, (t[1] >> 16) as f64);
+        match &rects[t[0] as usize] {
+            None => true,
+            Some(rs) => rs
+                .iter()
+                .any(|r| r[0] <= tx && tx <= r[1] && r[2] <= ty && ty <= r[3]),
+        }
+    };
+    let (mut inside, outside): (Vec<[u32; 2]>, Vec<[u32; 2]>) =
+        tiles.iter().partition(|t| meets(t));
+    let n = inside.len();
+    inside.extend(outside);
+    *tiles = inside;
+    n
+}
+
 /// Volume space → display space, the placement's affine map with its
 /// rotation made once (`Placement::to_display` makes it per point).
 struct VolumeMap {

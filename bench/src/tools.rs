@@ -1,0 +1,269 @@
+//! What a tool costs (G10 pays about 10 %): each tool placed where it
+//! changes no pixel (its image must equal no tool's, bit for bit) and in
+//! place, MImDA at γ = 0 (DVR's image) and at γ = 0.5, refraction with ν = 1
+//! (the plain image) and bending, on one transfer function at the user's
+//! default settings. Times are medians of rounds run round-robin, forwards
+//! then backwards; the samples each kernel takes are counted in a frame of
+//! their own, so that what a tool's effect asks for (more samples: a clip
+//! plane uncovers the inside) is told apart from the kernel's overhead
+//! (time per sample).
+
+use crate::kernels::bending;
+use crate::measure::{self, converged, timed_frame, write_table, Shot};
+use anyhow::{bail, Result};
+use parallax_common::config::{Mode, RenderConfig};
+use parallax_common::tf::TransferFunction;
+use parallax_common::tools::{BandPicker, ClipPlane, Probe, Tool};
+use std::path::Path;
+
+/// One combination's cost against no tool.
+#[derive(Clone, Debug)]
+pub struct ToolPoint {
+    pub tf: String,
+    pub name: &'static str,
+    /// Whether its image must equal the base's (placed where it changes
+    /// nothing), and whether it does, bit for bit.
+    pub neutral: bool,
+    pub equal: bool,
+    pub render_ms: f64,
+    pub samples: u64,
+    /// Kernel time and samples against the first combination (no tool).
+    pub time_ratio: f64,
+    pub sample_ratio: f64,
+}
+
+/// A clip plane through the head's middle with a 1 cm emphasis band.
+fn plane_in_place() -> Tool {
+    Tool::ClipPlane(ClipPlane {
+        point: [0.0, 0.0, 0.02],
+        normal: [0.0, 0.0, 1.0],
+        thickness: 0.01,
+        context: [0.3, 0.7],
+    })
+}
+
+/// The same plane moved 5 m towards the viewers: it misses the volume's
+/// box (and is left out of the kernel).
+fn plane_away() -> Tool {
+    Tool::ClipPlane(ClipPlane {
+        point: [0.0, 0.0, 5.0],
+        ..match plane_in_place() {
+            Tool::ClipPlane(c) => c,
+            _ => unreachable!(),
+        }
+    })
+}
+
+/// A plane through the head's middle whose normal points away from every
+/// viewer, with no band: the view-dependent factor μ is 1 on every ray, so
+/// it cuts nothing, but it stays in the kernel (G10 §4: the context comes
+/// back as the view turns).
+fn plane_facing_away() -> Tool {
+    Tool::ClipPlane(ClipPlane {
+        point: [0.0, 0.0, 0.02],
+        normal: [0.0, 0.0, -1.0],
+        thickness: 0.0,
+        context: [0.3, 0.7],
+    })
+}
+
+/// A band picker looking along the view, its band the middle fifth of the
+/// transfer function's values.
+fn band_picker(tf: &TransferFunction) -> Tool {
+    let p = tf.points();
+    let (lo, hi) = (p[0].value, p.last().map_or(p[0].value + 1.0, |q| q.value));
+    let at = |u: f64| lo + u * (hi - lo);
+    Tool::BandPicker(BandPicker {
+        band: [at(0.35), at(0.4), at(0.6), at(0.65)],
+        axis: [0.0, 0.0, 1.0],
+        alignment: [0.7, 0.95],
+    })
+}
+
+/// The combinations: their names, tools, settings, whether they must equal
+/// the base image, and whether they bend rays. No tool comes first.
+fn combinations(
+    cfg: &RenderConfig,
+    tf: &TransferFunction,
+) -> Vec<(&'static str, Vec<Tool>, RenderConfig, bool, bool)> {
+    let with = |mode, gamma, refraction| RenderConfig {
+        mode,
+        gamma,
+        refraction,
+        ..cfg.clone()
+    };
+    let probe = Tool::Probe(Probe::new([0.0, 0.02, 0.08], 0.05));
+    // In the air above the head's right side, within the view.
+    let probe_away = Tool::Probe(Probe::new([0.12, 0.1, 0.0], 0.025));
+    vec![
+        ("no tool", vec![], cfg.clone(), true, false),
+        (
+            "clip plane, 5 m away",
+            vec![plane_away()],
+            cfg.clone(),
+            true,
+            false,
+        ),
+        (
+            "clip plane, facing away",
+            vec![plane_facing_away()],
+            cfg.clone(),
+            true,
+            false,
+        ),
+        (
+            "probe, in the air",
+            vec![probe_away],
+            cfg.clone(),
+            true,
+            false,
+        ),
+        (
+            "pass-through x3",
+            vec![Tool::PassThrough; 3],
+            cfg.clone(),
+            true,
+            false,
+        ),
+        (
+            "MImDA gamma 0",
+            vec![],
+            with(Mode::Mimda, 0.0, false),
+            true,
+            false,
+        ),
+        (
+            "refraction, nu = 1",
+            vec![],
+            with(Mode::Dvr, 0.0, true),
+            true,
+            false,
+        ),
+        (
+            "clip plane in place",
+            vec![plane_in_place()],
+            cfg.clone(),
+            false,
+            false,
+        ),
+        ("probe in place", vec![probe], cfg.clone(), false, false),
+        (
+            "band picker",
+            vec![band_picker(tf)],
+            cfg.clone(),
+            false,
+            false,
+        ),
+        (
+            "MImDA gamma 0.5",
+            vec![],
+            with(Mode::Mimda, 0.5, false),
+            false,
+            false,
+        ),
+        (
+            "refraction, nu 1..1.1",
+            vec![],
+            with(Mode::Dvr, 0.0, true),
+            false,
+            true,
+        ),
+    ]
+}
+
+/// Runs the study on `shot` (its transfer function named `tf_name`) at
+/// `cfg`, `rounds` timed rounds.
+pub fn run(shot: Shot, tf_name: &str, cfg: &RenderConfig, rounds: usize) -> Result<Vec<ToolPoint>> {
+    let bent = bending(shot.tf)?;
+    let combos = combinations(cfg, shot.tf);
+    let mut renderers = Vec::new();
+    let mut images = Vec::new();
+    for (_, tools, c, _, bends) in &combos {
+        let tf = if *bends { &bent } else { shot.tf };
+        let (r, f) = converged(Shot { tf, ..shot }, c, tools, measure::CONVERGE_FRAMES)?;
+        images.push(f.images.into_iter().next().unwrap());
+        renderers.push(r);
+    }
+    let rounds = rounds.max(3);
+    let mut ms = vec![Vec::new(); combos.len()];
+    for round in 0..rounds {
+        for i in measure::round_order(round, combos.len()) {
+            let (_, _, c, _, bends) = &combos[i];
+            let tf = if *bends { &bent } else { shot.tf };
+            let (f, _) = timed_frame(
+                &mut renderers[i],
+                200 + round as u64,
+                Shot { tf, ..shot },
+                c,
+            )?;
+            ms[i].push(f.stats.render_ms);
+        }
+    }
+    let mut out: Vec<ToolPoint> = Vec::new();
+    for (i, (name, _, c, neutral, bends)) in combos.iter().enumerate() {
+        let tf = if *bends { &bent } else { shot.tf };
+        renderers[i].count_samples = true;
+        let (f, _) = timed_frame(&mut renderers[i], 1000, Shot { tf, ..shot }, c)?;
+        let render_ms = measure::median(&mut ms[i]);
+        let samples = f.stats.samples;
+        let equal = images[i]
+            .iter()
+            .zip(&images[0])
+            .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits));
+        let base = out.first();
+        out.push(ToolPoint {
+            tf: tf_name.to_string(),
+            name,
+            neutral: *neutral,
+            equal,
+            render_ms,
+            samples,
+            time_ratio: render_ms / base.map_or(render_ms, |b| b.render_ms),
+            sample_ratio: samples as f64 / base.map_or(samples, |b| b.samples).max(1) as f64,
+        });
+    }
+    if let Some(p) = out.iter().find(|p| p.neutral && !p.equal) {
+        bail!("{tf_name}: {} changes the image where it must not", p.name);
+    }
+    Ok(out)
+}
+
+pub fn print(points: &[ToolPoint]) {
+    for p in points {
+        println!(
+            "{:>12} {:>28}: {:8.1} ms in the kernel, {:.2}× no tool; samples {:.2}×, time per sample {:.2}×{}",
+            p.tf,
+            p.name,
+            p.render_ms,
+            p.time_ratio,
+            p.sample_ratio,
+            p.time_ratio / p.sample_ratio.max(1e-30),
+            if p.neutral {
+                " (image equal to no tool's, bit for bit)"
+            } else {
+                ""
+            }
+        );
+    }
+}
+
+pub fn write_csv(path: &Path, points: &[ToolPoint]) -> Result<()> {
+    write_table(
+        path,
+        "tf,combination,neutral,equal,render_ms,samples,time_ratio,sample_ratio,time_per_sample_ratio",
+        points.iter().map(|p| {
+            format!(
+                "{},{},{},{},{:.3},{},{:.4},{:.4},{:.4}",
+                p.tf,
+                p.name,
+                p.neutral,
+                p.equal,
+                p.render_ms,
+                p.samples,
+                p.time_ratio,
+                p.sample_ratio,
+                p.time_ratio / p.sample_ratio.max(1e-30)
+            )
+        }),
+    )
+}
