@@ -356,6 +356,43 @@ fn a_websocket_client_drives_the_desktop_view() {
         }
         assert_eq!(a.state["tools"][0]["point"], json!([0.0, 0.0, 4.0]));
 
+        // Tools are data: a page adds a probe and a band picker, changes
+        // the probe's radius, is refused a field the probe does not have
+        // and a fourth tool, each by name, and removes them again; every
+        // change renders.
+        let n = a.state["tools"].as_array().unwrap().len();
+        assert_eq!(n, 1);
+        let v = a
+            .change(json!({"type": "add-tool", "tool": {"kind": "probe", "center": [0, 0, 0.02], "radius": 0.03}}))
+            .await;
+        let with_probe = a.settled(v).await.pixels();
+        assert_eq!(a.state["tools"][1]["kind"], "probe");
+        let v = a
+            .change(json!({"type": "tool", "index": 1, "radius": 0.05}))
+            .await;
+        let wider = a.settled(v).await.pixels();
+        assert_eq!(a.state["tools"][1]["radius"], json!(0.05));
+        assert!(diff(&with_probe, &wider) > 0.0, "a wider probe changed the image");
+        let v = a
+            .change(json!({"type": "add-tool", "tool": {"kind": "band-picker", "band": [60, 80, 120, 140]}}))
+            .await;
+        a.settled(v).await;
+        for (bad, says) in [
+            (json!({"type": "tool", "index": 1, "normal": [0, 0, 1]}), "normal"),
+            (json!({"type": "tool", "index": 1, "radius": -1}), "radius"),
+            (json!({"type": "add-tool", "tool": {"kind": "probe", "center": [0, 0, 0], "radius": 0.1}}), "3 tools at most"),
+            (json!({"type": "remove-tool", "index": 7}), "index"),
+        ] {
+            a.send(bad.clone()).await;
+            let e = a.error().await;
+            assert!(e.contains(says), "{bad} → {e}");
+        }
+        let v = a.change(json!({"type": "remove-tool", "index": 2})).await;
+        a.settled(v).await;
+        let v = a.change(json!({"type": "remove-tool", "index": 1})).await;
+        a.settled(v).await;
+        assert_eq!(a.state["tools"].as_array().unwrap().len(), 1);
+
         // Focus: a click on the volume moves it along z so that the
         // clicked point lies on the screen plane; a click on empty space
         // is refused.
@@ -388,7 +425,9 @@ fn a_websocket_client_drives_the_desktop_view() {
         let v = a.change(json!({"type": "state", "state": linked})).await;
         assert_eq!(a.state, linked);
         a.settled(v).await;
-        linked["tools"] = json!([]);
+        // Its tool list may differ from the scene's (a page adds and
+        // removes tools), within the chain's three.
+        linked["tools"] = json!(vec![json!({"kind": "pass-through"}); 4]);
         a.send(json!({"type": "state", "state": linked})).await;
         let e = a.error().await;
         assert!(e.contains("tools"), "{e}");
@@ -589,7 +628,14 @@ fn the_wall_under_mpirun_shows_the_eye_view_and_its_recording_replays_bit_for_bi
         let v = c
             .change(json!({"type": "set", "eta": 0.5, "accuracy": 0.5}))
             .await;
-        c.settled(v).await;
+        let img_set = c.settled(v).await.pixels();
+        // A tool added from the page reaches both back ends in the frame
+        // it is made (the replay below is bit for bit per projector).
+        let v = c
+            .change(json!({"type": "add-tool", "tool": {"kind": "probe", "center": [0, 0, 0.05], "radius": 0.08}}))
+            .await;
+        let img3 = c.settled(v).await.pixels();
+        assert!(diff(&img_set, &img3) > 0.0, "the probe changed the view");
         // A projector's own image.
         let v = c.change(json!({"type": "output", "output": "p03"})).await;
         let f = c.settled(v).await;
@@ -925,6 +971,29 @@ fn a_real_browser_drags_the_volume_round() {
             write_rgb_png(&keep, &after);
             assert!(lit > 0.05, "the volume is visible in the page ({lit})");
             assert!(d > 2.0, "the page shows the volume rotated (change {d})");
+            // The page adds a probe (its kind chosen in the tool menu),
+            // shows its fields, and removes it again with its button.
+            let n0 = observer.state["tools"].as_array().unwrap().len();
+            cdp.eval("(() => { document.getElementById('addkind').value = 'probe'; document.getElementById('addtool').click(); return ''; })()").await;
+            let start = Instant::now();
+            while observer.state["tools"].as_array().unwrap().len() == n0 {
+                assert!(start.elapsed() < WAIT, "the page's new tool never reached the server");
+                observer.next_text().await;
+            }
+            assert_eq!(observer.state["tools"][n0]["kind"], "probe");
+            let fields_js = format!("(() => {{ const t = document.querySelectorAll('#tools .tool')[{n0}]; return t ? t.querySelectorAll('input').length : -1; }})()");
+            let start = Instant::now();
+            // center (3), radius, axis (3), alignment (2), gradient (2).
+            while cdp.eval(&fields_js).await != json!(11) {
+                assert!(start.elapsed() < WAIT, "the page never showed the probe's fields");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+            cdp.eval(&format!("(() => {{ document.querySelectorAll('#tools .removetool')[{n0}].click(); return ''; }})()")).await;
+            let start = Instant::now();
+            while observer.state["tools"].as_array().unwrap().len() != n0 {
+                assert!(start.elapsed() < WAIT, "the page's remove never reached the server");
+                observer.next_text().await;
+            }
             cdp.session = None;
             let _ = cdp.call("Browser.close", json!({})).await;
             observer.send(json!({"type": "quit"})).await;

@@ -96,7 +96,17 @@ pub struct Key {
     pub transfer_function: Option<PathBuf>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub tool: Vec<ToolKey>,
+    /// The whole tool set from this frame on, `[[tool]]` tables (replaces
+    /// the scene's; a recording writes it, since a live page may add and
+    /// remove tools). `tool` keys then index this set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tools: Option<ToolSet>,
 }
+
+/// A tool set as a script writes it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct ToolSet(#[serde(with = "parallax_common::tools::list")] pub Vec<Tool>);
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -164,8 +174,10 @@ pub struct Script {
     step_factor: Track<1>,
     /// (first frame, file) of each transfer function switch.
     tfs: Vec<(u64, PathBuf)>,
-    /// Per tool index of the scene.
+    /// Per tool index of the scene (or of the tool set in force).
     tools: Vec<ToolTracks>,
+    /// (first frame, tools) of each tool set switch.
+    tool_sets: Vec<(u64, Vec<Tool>)>,
     name: String,
 }
 
@@ -201,6 +213,7 @@ impl Script {
             step_factor: Track::default(),
             tfs: Vec::new(),
             tools: Vec::new(),
+            tool_sets: Vec::new(),
             name: name.to_string(),
         };
         let mut last = None;
@@ -261,6 +274,10 @@ impl Script {
                     bail!("{at}: step_factor must be > 0 (got {f})");
                 }
                 s.step_factor.keys.push((k.frame, [f]));
+            }
+            if let Some(ToolSet(set)) = &k.tools {
+                parallax_common::tools::check_tools(set, Path::new(&format!("{at}: tools")))?;
+                s.tool_sets.push((k.frame, set.clone()));
             }
             for t in &k.tool {
                 let at = format!("{at}: tool {}", t.index);
@@ -332,8 +349,15 @@ impl Script {
         self.step_factor.at(frame, [scene])[0]
     }
 
-    /// The tools at `frame`: the scene's, moved and changed as the keys say.
+    /// The tools at `frame`: the scene's (or the tool set in force),
+    /// moved and changed as the keys say.
     pub fn tools(&self, frame: u64, scene: &[Tool]) -> Result<Vec<Tool>> {
+        let scene = self
+            .tool_sets
+            .iter()
+            .rev()
+            .find(|(f, _)| *f <= frame)
+            .map_or(scene, |(_, set)| set.as_slice());
         if self.tools.len() > scene.len() {
             bail!(
                 "{}: tool {}: the scene has only {} tool(s)",
@@ -500,6 +524,30 @@ mod tool_tests {
         assert_eq!(s.gamma(50, 0.3), 1.0);
         // A key for a tool the scene does not have.
         assert!(s.tools(0, &[]).unwrap_err().to_string().contains("s.toml"));
+    }
+
+    #[test]
+    fn a_tool_set_replaces_the_scene_tools_from_its_frame() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("s.toml");
+        std::fs::write(
+            &p,
+            "[[key]]\nframe = 0\n[[key]]\nframe = 4\ntools = [{ kind = \"probe\", center = [0, 0, 0], radius = 0.02 }, { kind = \"pass-through\" }]\n",
+        )
+        .unwrap();
+        let s = Script::load(&p).unwrap();
+        let scene = vec![Tool::PassThrough];
+        assert_eq!(s.tools(3, &scene).unwrap(), scene);
+        let t = s.tools(4, &scene).unwrap();
+        assert_eq!(t.len(), 2);
+        assert!(matches!(t[0], Tool::Probe(p) if p.radius == 0.02));
+        std::fs::write(
+            &p,
+            "[[key]]\nframe = 0\ntools = [{ kind = \"probe\", center = [0, 0, 0], radius = -1 }]\n",
+        )
+        .unwrap();
+        let e = Script::load(&p).unwrap_err().to_string();
+        assert!(e.contains("s.toml: key 1") && e.contains("radius"), "{e}");
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! through ffmpeg when it is installed, else an animated GIF).
 
 use super::LiveState;
-use crate::script::{Key, PlacementKey, ScriptFile, ToolKey};
+use crate::script::{Key, PlacementKey, ScriptFile, ToolSet};
 use anyhow::{Context, Result};
 use parallax_common::protocol::FrameState;
 use parallax_common::tf::TransferFunction;
@@ -131,41 +131,9 @@ fn key_of(r: &Recorded, tf_file: Option<PathBuf>) -> Key {
         accuracy: Some(s.render.accuracy),
         step_factor: Some(s.render.step_factor),
         transfer_function: tf_file,
-        tool: r
-            .tools
-            .iter()
-            .enumerate()
-            .filter_map(|(index, t)| match t {
-                Tool::ClipPlane(c) => Some(ToolKey {
-                    index,
-                    point: Some(c.point),
-                    normal: Some(c.normal),
-                    thickness: Some(c.thickness),
-                    context: Some(c.context),
-                    radius: None,
-                    axis: None,
-                }),
-                Tool::Probe(p) => Some(ToolKey {
-                    index,
-                    point: Some(p.center),
-                    normal: None,
-                    thickness: None,
-                    context: None,
-                    radius: Some(p.radius),
-                    axis: Some(p.axis),
-                }),
-                Tool::BandPicker(b) => Some(ToolKey {
-                    index,
-                    point: None,
-                    normal: None,
-                    thickness: None,
-                    context: None,
-                    radius: None,
-                    axis: Some(b.axis),
-                }),
-                _ => None,
-            })
-            .collect(),
+        // The whole tool set: a page may have added or removed tools.
+        tool: Vec::new(),
+        tools: Some(ToolSet(r.tools.clone())),
     }
 }
 

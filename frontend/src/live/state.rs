@@ -8,7 +8,7 @@ use parallax_common::camera::Placement;
 use parallax_common::config::{Display, Scene};
 use parallax_common::protocol::StreamImage;
 use parallax_common::tf::TransferFunction;
-use parallax_common::tools::Tool;
+use parallax_common::tools::{EnhancerKind, Tool, MAX_ENHANCERS};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -66,12 +66,15 @@ pub enum ClientMsg {
     Tf {
         point: Vec<PointMsg>,
     },
-    Tool {
+    /// Changes fields of a tool.
+    Tool(Box<ToolEdit>),
+    /// Adds a tool at the chain's end: a `[[tool]]` table as JSON.
+    AddTool {
+        tool: serde_json::Value,
+    },
+    /// Removes tool `index`.
+    RemoveTool {
         index: usize,
-        point: Option<[f64; 3]>,
-        normal: Option<[f64; 3]>,
-        thickness: Option<f64>,
-        context: Option<[f64; 2]>,
     },
     Output {
         output: String,
@@ -88,6 +91,25 @@ pub enum ClientMsg {
         state: Box<LiveState>,
     },
     Quit,
+}
+
+/// A `tool` message: any of tool `index`'s kind's fields (a clip plane:
+/// point, normal, thickness, context; a probe: center, radius, axis,
+/// alignment, gradient; a band picker: band, axis, alignment).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToolEdit {
+    index: usize,
+    point: Option<[f64; 3]>,
+    normal: Option<[f64; 3]>,
+    thickness: Option<f64>,
+    context: Option<[f64; 2]>,
+    center: Option<[f64; 3]>,
+    radius: Option<f64>,
+    axis: Option<[f64; 3]>,
+    alignment: Option<[f64; 2]>,
+    gradient: Option<[f64; 2]>,
+    band: Option<[f64; 4]>,
 }
 
 /// How far the volume's centre may be from the screen's (m, per axis):
@@ -116,21 +138,51 @@ fn within3(name: &str, v: [f64; 3], lo: f64, hi: f64) -> Result<[f64; 3]> {
 
 /// The bounds a tool's pose keeps, whichever message sets it.
 fn tool_bounds(tool: &Tool, what: &str) -> Result<()> {
-    let Tool::ClipPlane(c) = tool else {
-        return Ok(());
+    let place = |name: &str, p: [f64; 3]| {
+        within3(&format!("{what}.{name}"), p, -CENTER_LIMIT, CENTER_LIMIT)
     };
-    within3(
-        &format!("{what}.point"),
-        c.point,
-        -CENTER_LIMIT,
-        CENTER_LIMIT,
-    )?;
-    within3(&format!("{what}.normal"), c.normal, -1e3, 1e3)?;
-    within(&format!("{what}.thickness"), c.thickness, 0.0, 10.0)?;
-    for x in c.context {
-        within(&format!("{what}.context"), x, -10.0, 10.0)?;
+    match tool {
+        Tool::ClipPlane(c) => {
+            place("point", c.point)?;
+            within3(&format!("{what}.normal"), c.normal, -1e3, 1e3)?;
+            within(&format!("{what}.thickness"), c.thickness, 0.0, 10.0)?;
+        }
+        Tool::Probe(p) => {
+            place("center", p.center)?;
+            within3(&format!("{what}.axis"), p.axis, -1e3, 1e3)?;
+        }
+        Tool::BandPicker(b) => {
+            within3(&format!("{what}.axis"), b.axis, -1e3, 1e3)?;
+            for x in b.band {
+                within(&format!("{what}.band"), x, -1e12, 1e12)?;
+            }
+        }
+        Tool::PassThrough | Tool::ExitDirection => {}
     }
     Ok(())
+}
+
+/// One tool to and from its `[[tool]]` table (JSON).
+#[derive(Serialize, Deserialize)]
+struct ToolList {
+    #[serde(with = "parallax_common::tools::list")]
+    tool: Vec<Tool>,
+}
+
+fn tool_table(tool: &Tool) -> Result<serde_json::Map<String, serde_json::Value>> {
+    let v = serde_json::to_value(ToolList {
+        tool: vec![tool.clone()],
+    })?;
+    match &v["tool"][0] {
+        serde_json::Value::Object(m) => Ok(m.clone()),
+        _ => bail!("a tool is not a table"),
+    }
+}
+
+fn tool_from_table(table: serde_json::Value, what: &str) -> Result<Tool> {
+    let list: ToolList = serde_json::from_value(serde_json::json!({ "tool": [table] }))
+        .with_context(|| what.to_string())?;
+    Ok(list.tool.into_iter().next().expect("one tool"))
 }
 
 /// The outputs a display offers: the desktop window, or each projector and
@@ -162,6 +214,7 @@ pub fn hello(
         "outputs": outputs(display),
         "value_range": range,
         "tool_kinds": scene.tools.iter().map(|t| t.enhancer().file()).collect::<Vec<_>>(),
+        "all_tool_kinds": EnhancerKind::ALL.iter().map(|k| k.file()).collect::<Vec<_>>(),
         "eye_range": [-w, w],
         "record_dir": record_dir.display().to_string(),
     })
@@ -231,13 +284,53 @@ impl LiveState {
                 }
             }
             ClientMsg::Tf { point } => self.set_tf(point)?,
-            ClientMsg::Tool {
-                index,
-                point,
-                normal,
-                thickness,
-                context,
-            } => self.pose_tool(index, point, normal, thickness, context)?,
+            ClientMsg::Tool(edit) => {
+                let ToolEdit {
+                    index,
+                    point,
+                    normal,
+                    thickness,
+                    context,
+                    center,
+                    radius,
+                    axis,
+                    alignment,
+                    gradient,
+                    band,
+                } = *edit;
+                let j = |v: Option<Vec<f64>>| v.map(|x| serde_json::json!(x));
+                let fields = [
+                    ("point", j(point.map(Vec::from))),
+                    ("normal", j(normal.map(Vec::from))),
+                    ("thickness", thickness.map(|x| serde_json::json!(x))),
+                    ("context", j(context.map(Vec::from))),
+                    ("center", j(center.map(Vec::from))),
+                    ("radius", radius.map(|x| serde_json::json!(x))),
+                    ("axis", j(axis.map(Vec::from))),
+                    ("alignment", j(alignment.map(Vec::from))),
+                    ("gradient", j(gradient.map(Vec::from))),
+                    ("band", j(band.map(Vec::from))),
+                ];
+                self.edit_tool(index, &fields)?
+            }
+            ClientMsg::AddTool { tool } => {
+                ensure!(
+                    self.tools.len() < MAX_ENHANCERS,
+                    "add-tool: the chain holds {MAX_ENHANCERS} tools at most"
+                );
+                let t = tool_from_table(tool, "add-tool.tool")?;
+                tool_bounds(&t, "add-tool.tool")?;
+                t.check("add-tool.tool")?;
+                self.tools.push(t);
+            }
+            ClientMsg::RemoveTool { index } => {
+                ensure!(
+                    index < self.tools.len(),
+                    "remove-tool.index: {index}, the scene has {} tool(s)",
+                    self.tools.len()
+                );
+                self.tools.remove(index);
+            }
             ClientMsg::Output { output, eye_x } => {
                 ensure!(
                     outputs(display).contains(&output),
@@ -282,37 +375,30 @@ impl LiveState {
         Ok(())
     }
 
-    /// A clip plane moved, turned, thickened or given its context band.
-    fn pose_tool(
+    /// Fields of tool `index` changed: each given field replaces the
+    /// tool's (a field its kind does not have is refused by name), then the
+    /// tool is checked whole.
+    fn edit_tool(
         &mut self,
         index: usize,
-        point: Option<[f64; 3]>,
-        normal: Option<[f64; 3]>,
-        thickness: Option<f64>,
-        context: Option<[f64; 2]>,
+        fields: &[(&str, Option<serde_json::Value>)],
     ) -> Result<()> {
         let n = self.tools.len();
         let tool = self
             .tools
             .get_mut(index)
             .with_context(|| format!("tool.index: {index}, the scene has {n} tool(s)"))?;
-        let Tool::ClipPlane(c) = tool else {
-            bail!("tool {index}: this kind of tool has no pose");
-        };
-        if let Some(p) = point {
-            c.point = p;
+        let mut table = tool_table(tool)?;
+        for (name, v) in fields {
+            if let Some(v) = v {
+                table.insert(name.to_string(), v.clone());
+            }
         }
-        if let Some(v) = normal {
-            c.normal = v;
-        }
-        if let Some(t) = thickness {
-            c.thickness = t;
-        }
-        if let Some(x) = context {
-            c.context = x;
-        }
-        tool_bounds(tool, "tool")?;
-        tool.check(&format!("tool {index}"))?;
+        let kind = tool.enhancer().file();
+        let edited = tool_from_table(table.into(), &format!("tool {index} ({kind})"))?;
+        tool_bounds(&edited, "tool")?;
+        edited.check(&format!("tool {index}"))?;
+        *tool = edited;
         Ok(())
     }
 
@@ -350,12 +436,9 @@ impl LiveState {
         );
         next.tf = TransferFunction::from_points(s.tf.points().to_vec()).context("state.tf")?;
         ensure!(
-            s.tools.len() == self.tools.len()
-                && s.tools
-                    .iter()
-                    .zip(&self.tools)
-                    .all(|(a, b)| a.enhancer() == b.enhancer()),
-            "state.tools: not this scene's tools"
+            s.tools.len() <= MAX_ENHANCERS,
+            "state.tools: {} tools, at most {MAX_ENHANCERS} can be chained",
+            s.tools.len()
         );
         for (i, t) in s.tools.iter().enumerate() {
             tool_bounds(t, &format!("state.tools {i}"))?;
