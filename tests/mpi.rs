@@ -496,12 +496,12 @@ fn a_stopped_back_end_is_named_within_the_watchdog_timeout() {
     assert_eq!(stats.len(), 2 * 2, "frames 0 and 1 from two back ends");
 }
 
-/// Tools and MImDA in the cluster: two clip planes (one moved by the
-/// script, so the tool set is re-sent) and a context-preserving probe
+/// Tools and MImDA in the cluster: a clip plane (moved by the script, so
+/// the tool set is re-sent), a band picker and a context-preserving probe
 /// chained, and γ > 0, render identically under `mpirun -n 3` and embedded
 /// with two back ends.
 #[test]
-fn clip_planes_a_probe_and_mimda_render_identically_in_the_cluster() {
+fn a_clip_plane_band_picker_probe_and_mimda_render_identically_in_the_cluster() {
     let w = World::new();
     std::fs::write(
         w.path("tf-importance.toml"),
@@ -518,7 +518,7 @@ fn clip_planes_a_probe_and_mimda_render_identically_in_the_cluster() {
             .replace("\"tf.toml\"", "\"tf-importance.toml\"")
             .replace("[render]\n", "[render]\nmode = \"mimda\"\ngamma = 0.7\n")
             + "[[tool]]\nkind = \"clip-plane\"\npoint = [0, 0, 0.12]\nnormal = [0, 0, 1]\nthickness = 0.02\n\
-               [[tool]]\nkind = \"clip-plane\"\npoint = [0.05, 0, 0]\nnormal = [1, 0, 0.3]\ncontext = [0.2, 0.9]\n\
+               [[tool]]\nkind = \"band-picker\"\nband = [80, 120, 200, 240]\naxis = [0.2, 0, 1]\n\
                [[tool]]\nkind = \"probe\"\ncenter = [0, 0, 0.04]\nradius = 0.05\n",
     )
     .unwrap();
