@@ -22,16 +22,18 @@ fn ENH_start(ray: ptr<function, Ray>) {
 // The trapezoid's largest value over [lo, hi].
 fn ENH_weight(lo: f32, hi: f32) -> f32 {
     let b = tools[ENH_INDEX].a;
+    // The plateau first: with b0 = b1 (or b2 = b3) its edge value is 1.
+    if (hi >= b.y && lo <= b.z) {
+        return 1.0;
+    }
     if (hi <= b.x || lo >= b.w) {
         return 0.0;
     }
+    // Wholly on one ramp: its value at the end nearer the plateau.
     if (hi < b.y) {
         return (hi - b.x) / max(b.y - b.x, 1e-30);
     }
-    if (lo > b.z) {
-        return (b.w - lo) / max(b.w - b.z, 1e-30);
-    }
-    return 1.0;
+    return (b.w - lo) / max(b.w - b.z, 1e-30);
 }
 
 fn ENH_sample(smp: ptr<function, Sample>) {
