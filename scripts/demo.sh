@@ -35,28 +35,26 @@ cp "$out/mimda/frame_00007/window.png" "$out/colin27-mimda.png"
 cp "$out/iso/frame_00007/window.png" "$out/colin27-iso.png"
 
 # The light field: a 16-projector wall (η = 1), and what five eyes along
-# the viewing line see on it.
-$px render --scene configs/scenes/colin27-wall.toml --frames 6 --sync --out "$out/wall16"
-$px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16/frame_00005" \
-  --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-eyes.png"
+# the viewing line see on it. `wall SCENE NAME` renders the wall's scene
+# into $out/NAME and writes the eye sweep $out/NAME-eyes.png.
+wall() {
+  $px render --scene "configs/scenes/$1.toml" --frames 6 --sync --out "$out/$2"
+  $px simulate --display configs/displays/wall16/display.toml --frames "$out/$2/frame_00005" \
+    --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/$2-eyes.png"
+}
+wall colin27-wall wall16
 
 
 # The view-dependent clip plane on the wall: eyes on the right look straight
 # at the cut and see inside, eyes on the left look along it and the skin
 # comes back.
-$px render --scene configs/scenes/colin27-wall-clip.toml --frames 6 --sync --out "$out/wall16-clip"
-$px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16-clip/frame_00005" \
-  --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-clip-eyes.png"
+wall colin27-wall-clip wall16-clip
 
 # The context-preserving probe on the wall: eyes on the right look along its
 # axis and keep the edges of the tissue it clears; from the left they are
-# gone.
-$px render --scene configs/scenes/colin27-wall-probe.toml --frames 6 --sync --out "$out/wall16-probe"
-$px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16-probe/frame_00005" \
-  --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-probe-eyes.png"
-$px render --scene configs/scenes/colin27-wall-band.toml --frames 6 --sync --out "$out/wall16-band"
-$px simulate --display configs/displays/wall16/display.toml --frames "$out/wall16-band/frame_00005" \
-  --eye=-0.3,0,2 --eye=0.3,0,2 --sweep 5 --resolution 320x180 -o "$out/wall16-band-eyes.png"
+# gone. The band picker likewise: the white matter alone on the right.
+wall colin27-wall-probe wall16-probe
+wall colin27-wall-band wall16-band
 
 # A Looking Glass Portrait: its 48 views interleaved onto the panel's
 # sub-pixels through the lenticular mapping of its calibration (the display

@@ -141,6 +141,15 @@ fn default_gradient() -> [f64; 2] {
 }
 
 impl Probe {
+    /// The sphere's centre and radius in volume space (data length units).
+    pub fn in_volume(&self, ctx: &PackContext) -> (DVec3, f64) {
+        let k = ctx.placement.scale(ctx.extent);
+        let rt = ctx.placement.rotation().transpose();
+        let centre = rt * (DVec3::from(self.center) - DVec3::from(ctx.placement.center)) / k
+            + DVec3::from(ctx.extent) * 0.5;
+        (centre, self.radius / k)
+    }
+
     /// A probe at `center` of `radius` with the default axis and filters.
     pub fn new(center: [f64; 3], radius: f64) -> Probe {
         Probe {
@@ -375,13 +384,10 @@ impl Tool {
                 ]
             }
             Tool::Probe(p) => {
-                let k = ctx.placement.scale(ctx.extent);
-                let rt = ctx.placement.rotation().transpose();
-                let centre = rt * (DVec3::from(p.center) - DVec3::from(ctx.placement.center)) / k
-                    + DVec3::from(ctx.extent) * 0.5;
-                let axis = rt * DVec3::from(p.axis).normalize();
+                let (centre, r) = p.in_volume(ctx);
+                let axis = ctx.placement.rotation().transpose() * DVec3::from(p.axis).normalize();
                 [
-                    [f(centre.x), f(centre.y), f(centre.z), f(p.radius / k)],
+                    [f(centre.x), f(centre.y), f(centre.z), f(r)],
                     [
                         f(axis.x),
                         f(axis.y),
@@ -417,9 +423,7 @@ impl Tool {
     pub fn region(&self, ctx: &PackContext) -> Option<[[f64; 3]; 2]> {
         match self {
             Tool::Probe(p) => {
-                let [a, ..] = self.pack(ctx);
-                let r = p.radius / ctx.placement.scale(ctx.extent);
-                let c = DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
+                let (c, r) = p.in_volume(ctx);
                 Some([(c - r).to_array(), (c + r).to_array()])
             }
             t if t.enhancer().spec().gradient || t.enhancer().spec().importance => {
@@ -450,15 +454,11 @@ impl Tool {
                     .fold(f64::NEG_INFINITY, f64::max)
                     > -c.thickness
             }
-            Tool::Probe(_) => match self.region(ctx) {
-                Some([lo, hi]) => {
-                    let r = (hi[0] - lo[0]) / 2.0;
-                    let c = (DVec3::from(lo) + DVec3::from(hi)) / 2.0;
-                    let nearest = c.clamp(DVec3::ZERO, DVec3::from(ctx.extent));
-                    (nearest - c).length() < r
-                }
-                None => true,
-            },
+            Tool::Probe(p) => {
+                let (c, r) = p.in_volume(ctx);
+                let nearest = c.clamp(DVec3::ZERO, DVec3::from(ctx.extent));
+                (nearest - c).length() < r
+            }
             Tool::PassThrough | Tool::BandPicker(_) | Tool::ExitDirection => true,
         }
     }

@@ -254,14 +254,12 @@ pub fn flag_regions(
             let o = DVec3::from(v.observer);
             regions
                 .iter()
+                .map(|[lo, hi]| map.corners(DVec3::from(*lo), DVec3::from(*hi)))
                 // A region wholly behind the rays' origins (the observer's
                 // plane) meets no ray.
-                .filter(|[lo, hi]| {
-                    let corners = map.corners(DVec3::from(*lo), DVec3::from(*hi));
-                    !(o.z.abs() > 1e-12 && corners.iter().all(|p| p.z / o.z >= 1.0))
-                })
-                .map(|[lo, hi]| {
-                    let b = pixel_bounds(v, &map.corners(DVec3::from(*lo), DVec3::from(*hi)))?;
+                .filter(|corners| !(o.z.abs() > 1e-12 && corners.iter().all(|p| p.z / o.z >= 1.0)))
+                .map(|corners| {
+                    let b = pixel_bounds(v, &corners)?;
                     let t = px_per_tile as f64;
                     Some([
                         (b[0] / t).floor(),

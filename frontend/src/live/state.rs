@@ -96,19 +96,30 @@ pub enum ClientMsg {
 /// A `tool` message: any of tool `index`'s kind's fields (a clip plane:
 /// point, normal, thickness, context; a probe: center, radius, axis,
 /// alignment, gradient; a band picker: band, axis, alignment).
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ToolEdit {
+    #[serde(skip_serializing)]
     index: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
     point: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     normal: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     thickness: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     context: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     center: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     radius: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     axis: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     alignment: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     gradient: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     band: Option<[f64; 4]>,
 }
 
@@ -284,35 +295,7 @@ impl LiveState {
                 }
             }
             ClientMsg::Tf { point } => self.set_tf(point)?,
-            ClientMsg::Tool(edit) => {
-                let ToolEdit {
-                    index,
-                    point,
-                    normal,
-                    thickness,
-                    context,
-                    center,
-                    radius,
-                    axis,
-                    alignment,
-                    gradient,
-                    band,
-                } = *edit;
-                let j = |v: Option<Vec<f64>>| v.map(|x| serde_json::json!(x));
-                let fields = [
-                    ("point", j(point.map(Vec::from))),
-                    ("normal", j(normal.map(Vec::from))),
-                    ("thickness", thickness.map(|x| serde_json::json!(x))),
-                    ("context", j(context.map(Vec::from))),
-                    ("center", j(center.map(Vec::from))),
-                    ("radius", radius.map(|x| serde_json::json!(x))),
-                    ("axis", j(axis.map(Vec::from))),
-                    ("alignment", j(alignment.map(Vec::from))),
-                    ("gradient", j(gradient.map(Vec::from))),
-                    ("band", j(band.map(Vec::from))),
-                ];
-                self.edit_tool(index, &fields)?
-            }
+            ClientMsg::Tool(edit) => self.edit_tool(&edit)?,
             ClientMsg::AddTool { tool } => {
                 ensure!(
                     self.tools.len() < MAX_ENHANCERS,
@@ -375,24 +358,18 @@ impl LiveState {
         Ok(())
     }
 
-    /// Fields of tool `index` changed: each given field replaces the
-    /// tool's (a field its kind does not have is refused by name), then the
-    /// tool is checked whole.
-    fn edit_tool(
-        &mut self,
-        index: usize,
-        fields: &[(&str, Option<serde_json::Value>)],
-    ) -> Result<()> {
-        let n = self.tools.len();
+    /// Fields of a tool changed: each given field replaces the tool's (a
+    /// field its kind does not have is refused by name), then the tool is
+    /// checked whole.
+    fn edit_tool(&mut self, edit: &ToolEdit) -> Result<()> {
+        let (index, n) = (edit.index, self.tools.len());
         let tool = self
             .tools
             .get_mut(index)
             .with_context(|| format!("tool.index: {index}, the scene has {n} tool(s)"))?;
         let mut table = tool_table(tool)?;
-        for (name, v) in fields {
-            if let Some(v) = v {
-                table.insert(name.to_string(), v.clone());
-            }
+        if let serde_json::Value::Object(fields) = serde_json::to_value(edit)? {
+            table.extend(fields);
         }
         let kind = tool.enhancer().file();
         let edited = tool_from_table(table.into(), &format!("tool {index} ({kind})"))?;
