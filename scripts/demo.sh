@@ -26,11 +26,15 @@ cp "$out/brain/frame_00007/window.png" "$out/colin27-brain.png"
 $px render --scene configs/scenes/colin27-clip.toml --frames 8 --sync --out "$out/clip"
 $px render --scene configs/scenes/colin27-probe.toml --frames 8 --sync --out "$out/probe"
 $px render --scene configs/scenes/colin27-band.toml --frames 8 --sync --out "$out/band"
+$px render --scene configs/scenes/colin27-shading.toml --frames 8 --sync --out "$out/shading"
+$px render --scene configs/scenes/colin27-overlay.toml --frames 8 --sync --out "$out/overlay"
 $px render --scene configs/scenes/colin27-mimda.toml --frames 8 --sync --out "$out/mimda"
 $px render --scene configs/scenes/colin27-iso.toml --frames 8 --sync --out "$out/iso"
 cp "$out/clip/frame_00007/window.png" "$out/colin27-clip.png"
 cp "$out/probe/frame_00007/window.png" "$out/colin27-probe.png"
 cp "$out/band/frame_00007/window.png" "$out/colin27-band.png"
+cp "$out/shading/frame_00007/window.png" "$out/colin27-shading.png"
+cp "$out/overlay/frame_00007/window.png" "$out/colin27-overlay.png"
 cp "$out/mimda/frame_00007/window.png" "$out/colin27-mimda.png"
 cp "$out/iso/frame_00007/window.png" "$out/colin27-iso.png"
 
@@ -56,6 +60,11 @@ wall colin27-wall-clip wall16-clip
 wall colin27-wall-probe wall16-probe
 wall colin27-wall-band wall16-band
 
+# Tool geometry on the wall: every projector draws the cursor and the
+# probe's sphere where its rays through them leave it, so every eye sees
+# them at the same place in space.
+wall colin27-wall-overlay wall16-overlay
+
 # A Looking Glass Portrait: its 48 views interleaved onto the panel's
 # sub-pixels through the lenticular mapping of its calibration (the display
 # in configs/displays/looking-glass-portrait/ was made from its visual.json
@@ -66,6 +75,7 @@ cp "$out/looking-glass/frame_00005/panel.png" "$out/looking-glass-panel.png"
 echo
 echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png, $out/colin27-clip.png,"
 echo "         $out/colin27-mimda.png, $out/colin27-iso.png, $out/wall16-eyes.png, $out/wall16-clip-eyes.png,"
-echo "         $out/colin27-probe.png, $out/colin27-band.png, $out/wall16-probe-eyes.png, $out/wall16-band-eyes.png"
+echo "         $out/colin27-probe.png, $out/colin27-band.png, $out/colin27-shading.png, $out/wall16-probe-eyes.png, $out/wall16-band-eyes.png,"
+echo "         $out/colin27-overlay.png, $out/wall16-overlay-eyes.png"
 echo "         and $out/looking-glass-panel.png (the panel of a Looking Glass, interleaved for its lenses)"
 echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"

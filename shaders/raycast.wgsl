@@ -383,6 +383,7 @@ fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f
     smp.alpha_scale = 1.0;
     smp.alpha_mix = 0.0;
     smp.color_scale = 1.0;
+    smp.shade = -1.0;
     smp.material = frame.light;
     // What the enhancers read, computed only where one that reads it acts
     // (`chain_active`: a probe's sphere), so that a tool costs its inputs
@@ -414,9 +415,24 @@ fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f
     } else if (shaded) {
         smp.gradient = gradient_levels(lv, blend, smp.pos);
     }
+    // The coarser levels' gradients (multilevel shading, G10 §3): the
+    // leaf's parent's and grandparent's, each the finer one's where that
+    // level is not resident.
+    if (COARSE_GRADIENTS && tools_here && inputs) {
+        smp.gradient_up = smp.gradient;
+        if (lv.up.slot != NO_SLOT) {
+            smp.gradient_up = gradient(lv.up, smp.pos);
+        }
+        smp.gradient_up2 = smp.gradient_up;
+        if (lv.up2.slot != NO_SLOT) {
+            smp.gradient_up2 = gradient(lv.up2, smp.pos);
+        }
+    }
     chain_sample(&smp);
     var shade = 1.0;
-    if (shaded) {
+    if (TOOL_SHADES && smp.shade >= 0.0) {
+        shade = smp.shade;
+    } else if (shaded) {
         shade = phong(smp.gradient, d, smp.material);
     }
     accumulate(acc, segment_optics(smp, shade), smp);
@@ -451,10 +467,15 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     var acc = Acc(vec3<f32>(0.0), 0.0, 0.0);
     var span = clip_box(o, d, frame.extent.xyz);
     let predicting = ISO && frame.predict.x > 0.0;
+    // The overlay's depth combination (G10 §5): where the ray's opacity
+    // first reaches ½, in the prediction buffer (−1: nowhere).
+    let record_depth = frame.optics.z > 0.5;
     if (span.y <= span.x) {
         image[out] = vec4<f32>(0.0);
         if (predicting) {
             prediction[out] = PB_MISS_BOX;
+        } else if (record_depth) {
+            prediction[out] = -1.0;
         }
         return;
     }
@@ -488,6 +509,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     // Distance travelled before the last refraction bend (the adaptive
     // step's t counts from the eye, not from the bend).
     var t_base = 0.0;
+    var depth_t = -1.0;
     loop {
         if (!next_leaf(&walk, o, d, inv_d, span.y, entry, acc, &snap, &have_prev)) {
             break;
@@ -503,8 +525,11 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
         // may skip their empty macrocells.
         var lv = Levels(leaf, leaf, leaf);
         var blend = false;
-        if (MULTILEVEL && !ISO) {
+        // Multilevel shading reads the coarser levels too, without blending.
+        if ((MULTILEVEL || COARSE_GRADIENTS) && !ISO) {
             lv = levels_of(leaf, walk.n);
+        }
+        if (MULTILEVEL && !ISO) {
             blend = lv.up.slot != NO_SLOT
                 && max(lod_offset(walk.level, o + d * t), lod_offset(walk.level, o + d * t_exit)) > 0.0;
         }
@@ -599,6 +624,9 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             s_prev = s;
             e_prev = e;
             tc = tn;
+            if (record_depth && depth_t < 0.0 && acc.alpha >= 0.5) {
+                depth_t = t_base + tc;
+            }
             if (REFRACTION) {
                 bent = bend_at(leaf, &o, &d, tc, nu_prev, smp.refraction);
                 if (bent) {
@@ -647,5 +675,10 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     }
     if (predicting) {
         prediction[out] = select(PB_MISS_SURFACE, hit_t, hit_t >= 0.0);
+    } else if (record_depth) {
+        if (ISO) {
+            depth_t = hit_t;
+        }
+        prediction[out] = select(-1.0, max(depth_t, 1e-30), depth_t >= 0.0);
     }
 }

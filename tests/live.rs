@@ -393,6 +393,57 @@ fn a_websocket_client_drives_the_desktop_view() {
         a.settled(v).await;
         assert_eq!(a.state["tools"].as_array().unwrap().len(), 1);
 
+        // Reordering: a multilevel shading tool added at the end moves to
+        // the chain's front and back; its own fields are edited like any
+        // kind's, its kind is not.
+        let v = a
+            .change(json!({"type": "add-tool", "tool": {"kind": "unsharp-gradient"}}))
+            .await;
+        a.settled(v).await;
+        let v = a.change(json!({"type": "move-tool", "from": 1, "to": 0})).await;
+        a.settled(v).await;
+        assert_eq!(a.state["tools"][0]["kind"], "unsharp-gradient");
+        assert_eq!(a.state["tools"][1]["kind"], "clip-plane");
+        let v = a
+            .change(json!({"type": "tool", "index": 0, "strength": 2.5, "level": 2}))
+            .await;
+        a.settled(v).await;
+        assert_eq!(a.state["tools"][0]["strength"], json!(2.5));
+        assert_eq!(a.state["tools"][0]["level"], json!(2));
+        for (bad, says) in [
+            (json!({"type": "tool", "index": 0, "kind": "probe"}), "kind"),
+            (json!({"type": "tool", "index": 0, "level": 3}), "level"),
+            (json!({"type": "move-tool", "from": 0, "to": 5}), "move-tool.to"),
+        ] {
+            a.send(bad.clone()).await;
+            let e = a.error().await;
+            assert!(e.contains(says), "{bad} → {e}");
+        }
+        let v = a.change(json!({"type": "move-tool", "from": 0, "to": 1})).await;
+        a.settled(v).await;
+        let v = a.change(json!({"type": "remove-tool", "index": 1})).await;
+        let plain = a.settled(v).await.pixels();
+        assert_eq!(a.state["tools"][0]["kind"], "clip-plane");
+
+        // The 3D cursor and the tools' geometry (G10 §5): drawn over the
+        // image when the overlay is on, gone when it is off; a cursor out
+        // of bounds is refused.
+        let v = a.change(json!({"type": "cursor", "point": [0.02, 0.01, 0.05]})).await;
+        let cursor_only = a.settled(v).await.pixels();
+        assert_eq!(diff(&plain, &cursor_only), 0.0, "the overlay is off");
+        let v = a.change(json!({"type": "set", "overlay": true})).await;
+        let drawn = a.settled(v).await.pixels();
+        assert!(diff(&plain, &drawn) > 0.0, "the overlay draws");
+        assert_eq!(a.state["cursor"], json!([0.02, 0.01, 0.05]));
+        a.send(json!({"type": "cursor", "point": [0.0, 0.0, 11.0]})).await;
+        assert!(a.error().await.contains("cursor.point"));
+        let v = a.change(json!({"type": "set", "overlay": false})).await;
+        let off = a.settled(v).await.pixels();
+        assert_eq!(diff(&plain, &off), 0.0, "the overlay is off again");
+        let v = a.change(json!({"type": "cursor", "point": null})).await;
+        a.settled(v).await;
+        assert_eq!(a.state["cursor"], json!(null));
+
         // Focus: a click on the volume moves it along z so that the
         // clicked point lies on the screen plane; a click on empty space
         // is refused.

@@ -498,8 +498,9 @@ fn a_stopped_back_end_is_named_within_the_watchdog_timeout() {
 
 /// Tools and MImDA in the cluster: a clip plane (moved by the script, so
 /// the tool set is re-sent), a band picker and a context-preserving probe
-/// chained, and γ > 0, render identically under `mpirun -n 3` and embedded
-/// with two back ends.
+/// chained, and γ > 0, with the tools' geometry and a cursor the script
+/// moves drawn over every projector (G10 §5), render identically under
+/// `mpirun -n 3` and embedded with two back ends.
 #[test]
 fn a_clip_plane_band_picker_probe_and_mimda_render_identically_in_the_cluster() {
     let w = World::new();
@@ -517,7 +518,8 @@ fn a_clip_plane_band_picker_probe_and_mimda_render_identically_in_the_cluster() 
             .unwrap()
             .replace("\"tf.toml\"", "\"tf-importance.toml\"")
             .replace("[render]\n", "[render]\nmode = \"mimda\"\ngamma = 0.7\n")
-            + "[[tool]]\nkind = \"clip-plane\"\npoint = [0, 0, 0.12]\nnormal = [0, 0, 1]\nthickness = 0.02\n\
+            + "[render.overlay]\nshow = true\ncursor = [0.02, 0, 0.1]\nlabel_height = 0.03\n\
+               [[tool]]\nkind = \"clip-plane\"\npoint = [0, 0, 0.12]\nnormal = [0, 0, 1]\nthickness = 0.02\n\
                [[tool]]\nkind = \"band-picker\"\nband = [80, 120, 200, 240]\naxis = [0.2, 0, 1]\n\
                [[tool]]\nkind = \"probe\"\ncenter = [0, 0, 0.04]\nradius = 0.05\n",
     )
@@ -525,8 +527,8 @@ fn a_clip_plane_band_picker_probe_and_mimda_render_identically_in_the_cluster() 
     let script = w.path("move.toml");
     std::fs::write(
         &script,
-        "frames = 4\n[[key]]\nframe = 0\ntool = [{ index = 0, point = [0, 0, 0.12] }]\n\
-         [[key]]\nframe = 3\ntool = [{ index = 0, point = [0, 0, 0.02] }]\n",
+        "frames = 4\n[[key]]\nframe = 0\ncursor = [0.02, 0, 0.1]\ntool = [{ index = 0, point = [0, 0, 0.12] }]\n\
+         [[key]]\nframe = 3\ncursor = [-0.05, 0.03, 0.05]\ntool = [{ index = 0, point = [0, 0, 0.02] }]\n",
     )
     .unwrap();
     let cluster = w.path("tools-cluster");

@@ -13,6 +13,7 @@ pub mod metric;
 pub mod mpcdi;
 pub mod node;
 pub mod output;
+pub mod overlay;
 pub mod pick;
 pub mod present;
 pub mod quilt;

@@ -67,6 +67,8 @@ pub struct Renderer {
     prediction: Option<(HistoryKey, u32)>,
     /// The tools (each an enhancer of the chain) and their version.
     tools: (u64, Vec<Tool>),
+    /// The overlay's pipeline (tool geometry), made on first use.
+    overlay: Option<crate::overlay::OverlayRenderer>,
     /// Wait for every posted read before refining (deterministic frames).
     pub sync_io: bool,
     /// The coarse copy of the volume the focus click is picked in, read on
@@ -180,6 +182,7 @@ impl Renderer {
             variance_range,
             prediction: None,
             tools: (0, Vec::new()),
+            overlay: None,
             sync_io: false,
             pick_volume: None,
             cells_stale: false,
@@ -313,17 +316,38 @@ impl Renderer {
         self.raycaster.frame_buffer_counts()
     }
 
+    /// The tools with what they take from the transfer function resolved
+    /// (a band picker's `points`).
+    fn resolved_tools(&self) -> Vec<Tool> {
+        let values: Vec<f64> = self.tf.as_ref().map_or_else(Vec::new, |t| {
+            t.function.points().iter().map(|p| p.value).collect()
+        });
+        self.tools
+            .1
+            .iter()
+            .map(|t| match t {
+                Tool::BandPicker(b) => Tool::BandPicker(b.resolved(&values)),
+                t => t.clone(),
+            })
+            .collect()
+    }
+
+    /// Where the volume is and how steep its data can be, for the tools.
+    fn pack_context(&self, placement: &Placement) -> PackContext {
+        PackContext {
+            placement: *placement,
+            extent: self.geometry(placement).extent(),
+            gradient_max: self.gradient_max(),
+        }
+    }
+
     /// The kernel and its parameters for this frame's scene state.
     fn settings(&self, placement: &Placement, cfg: &RenderConfig) -> RenderSettings {
-        let scene_extent = self.geometry(placement).extent();
-        let ctx = PackContext {
-            placement: *placement,
-            extent: scene_extent,
-            gradient_max: self.gradient_max(),
-        };
+        let ctx = self.pack_context(placement);
         // Tools that cannot change the volume's box are left out of the
         // kernel: a scene pays nothing for a tool moved away.
-        let acting: Vec<&Tool> = self.tools.1.iter().filter(|t| t.acts_on(&ctx)).collect();
+        let resolved = self.resolved_tools();
+        let acting: Vec<&Tool> = resolved.iter().filter(|t| t.acts_on(&ctx)).collect();
         let mut tools = [ToolParams::default(); MAX_ENHANCERS];
         for (p, t) in tools.iter_mut().zip(&acting) {
             let [a, b, c, d] = t.pack(&ctx);
@@ -358,6 +382,7 @@ impl Renderer {
             },
             subframe: None,
             predict: [0.0; 4],
+            record_depth: cfg.overlay.show && cfg.overlay.depth,
             tools,
             tool_regions,
             macrocells: cfg.macrocells,
@@ -501,6 +526,29 @@ impl Renderer {
             self.history_key = None;
             out.images
         };
+        let mut images = images;
+        if cfg.overlay.show {
+            cfg.overlay.check("render", cfg.refraction)?;
+            // Tool geometry over every view (G10 §5), in front of the
+            // volume: drawn after reconstruction, so no history holds it.
+            let ctx = self.pack_context(placement);
+            let shapes =
+                parallax_common::overlay::shapes(&cfg.overlay, &self.resolved_tools(), &ctx);
+            if !shapes.is_empty() {
+                if self.overlay.is_none() {
+                    self.overlay = Some(crate::overlay::OverlayRenderer::new(&self.gpu)?);
+                }
+                let depth = cfg.overlay.depth.then(|| {
+                    let units_per_metre = 1.0 / placement.scale(ctx.extent);
+                    (self.raycaster.depth_buffer(), units_per_metre)
+                });
+                let r = self.overlay.as_mut().expect("made above");
+                let layers = r.draw(&self.gpu, &shapes, &cfg.overlay, views, depth)?;
+                for (img, layer) in images.iter_mut().zip(&layers) {
+                    crate::overlay::lay_over(img, layer);
+                }
+            }
+        }
         stats.total_ms = ms(start);
         Ok(Frame {
             images,

@@ -351,6 +351,7 @@ fn the_band_picker_shows_only_its_band_along_its_axis() {
     let cfg = exact_config();
     let picker = Tool::BandPicker(BandPicker {
         band: [150.0, 170.0, 230.0, 250.0],
+        points: None,
         axis: [0.0, 0.0, 1.0],
         alignment: [0.7, 0.95],
     });
@@ -401,6 +402,37 @@ fn the_band_picker_shows_only_its_band_along_its_axis() {
     let img = render(&db, &tf, &[picker], &placement, &across, &cfg);
     assert!(mean_alpha(&plain) > 0.01);
     assert!(img == plain, "from 60° the band picker changes nothing");
+
+    // The band taken from the transfer function by index: its point 2 (60)
+    // as the plateau, points 1 and 3 (40, 255) as the feet — the same
+    // image as that band given by value, and not the image of no tool.
+    let by_value = |band: [f64; 4]| {
+        Tool::BandPicker(BandPicker {
+            band,
+            points: None,
+            axis: [0.0, 0.0, 1.0],
+            alignment: [0.7, 0.95],
+        })
+    };
+    let by_index = Tool::BandPicker(BandPicker {
+        band: [0.0; 4],
+        points: Some([2, 2]),
+        axis: [0.0, 0.0, 1.0],
+        alignment: [0.7, 0.95],
+    });
+    by_index.check("test").unwrap();
+    let a = render(&db, &tf, &[by_index], &placement, &along, &cfg);
+    let b = render(
+        &db,
+        &tf,
+        &[by_value([40.0, 60.0, 60.0, 255.0])],
+        &placement,
+        &along,
+        &cfg,
+    );
+    assert!(a == b, "the band by index differs from the band by value");
+    let none = render(&db, &tf, &[], &placement, &along, &cfg);
+    assert!(a != none);
 }
 
 /// Degenerate tools on degenerate data render finite, non-negative
@@ -431,6 +463,7 @@ fn degenerate_tools_on_degenerate_data_stay_finite() {
         Tool::Probe(Probe::new([0.0; 3], 1e-6)),
         Tool::BandPicker(BandPicker {
             band: [100.0, 100.0, 100.0, 100.0 + 1e-9],
+            points: None,
             axis: [0.0, 0.0, 1.0],
             alignment: [0.7, 0.95],
         }),

@@ -13,7 +13,9 @@ use crate::measure::{self, converged, timed_frame, write_table, Shot};
 use anyhow::{bail, Result};
 use parallax_common::config::{Mode, RenderConfig};
 use parallax_common::tf::TransferFunction;
-use parallax_common::tools::{BandPicker, ClipPlane, Probe, Tool};
+use parallax_common::tools::{
+    BandPicker, ClipPlane, ExaggeratedShading, Probe, Tool, UnsharpGradient,
+};
 use std::path::Path;
 
 /// One combination's cost against no tool.
@@ -75,9 +77,22 @@ fn band_picker(tf: &TransferFunction) -> Tool {
     let at = |u: f64| lo + u * (hi - lo);
     Tool::BandPicker(BandPicker {
         band: [at(0.35), at(0.4), at(0.6), at(0.65)],
+        points: None,
         axis: [0.0, 0.0, 1.0],
         alignment: [0.7, 0.95],
     })
+}
+
+/// Multilevel shading (G10 §3): the gradient unsharp-masked against the
+/// parent level's and exaggerated shading, at `strength` (0: plain shading).
+fn multilevel_shading(strength: f64) -> Vec<Tool> {
+    vec![
+        Tool::UnsharpGradient(UnsharpGradient { strength, level: 1 }),
+        Tool::ExaggeratedShading(ExaggeratedShading {
+            strength,
+            ..Default::default()
+        }),
+    ]
 }
 
 /// The combinations: their names, tools, settings, whether they must equal
@@ -126,6 +141,13 @@ fn combinations(
             false,
         ),
         (
+            "multilevel shading, strength 0",
+            multilevel_shading(0.0),
+            cfg.clone(),
+            true,
+            false,
+        ),
+        (
             "MImDA gamma 0",
             vec![],
             with(Mode::Mimda, 0.0, false),
@@ -150,6 +172,13 @@ fn combinations(
         (
             "band picker",
             vec![band_picker(tf)],
+            cfg.clone(),
+            false,
+            false,
+        ),
+        (
+            "multilevel shading",
+            multilevel_shading(1.0),
             cfg.clone(),
             false,
             false,

@@ -144,6 +144,10 @@ pub struct RenderConfig {
     /// "2d".
     #[serde(default = "exact")]
     pub preintegration: Preintegration,
+    /// `[render.overlay]`: the tools' geometry and the 3D cursor drawn over
+    /// every view (G10 §5; `common/src/overlay.rs`). Off by default.
+    #[serde(default)]
+    pub overlay: crate::overlay::Overlay,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -361,6 +365,7 @@ impl Scene {
             );
         }
         crate::tools::check_tools(&s.tools, f)?;
+        r.overlay.check(&f.display().to_string(), r.refraction)?;
         Ok(s)
     }
 }

@@ -17,6 +17,7 @@ pub mod atomic;
 pub mod camera;
 pub mod config;
 pub mod lenticular;
+pub mod overlay;
 pub mod paths;
 pub mod present;
 pub mod protocol;

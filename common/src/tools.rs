@@ -44,6 +44,17 @@ pub enum Tool {
     Probe(Probe),
     /// View-dependent band picker (G10 §4, Fig. 9).
     BandPicker(BandPicker),
+    /// Multilevel shading: unsharp masking of the gradient with a coarser
+    /// level's (G10 §3, Fig. 5).
+    UnsharpGradient(UnsharpGradient),
+    /// Multilevel shading: exaggerated shading over the leaf's, its
+    /// parent's and its grandparent's normals (G10 §3).
+    ExaggeratedShading(ExaggeratedShading),
+    /// Diagnostic: each pixel shows the gradient of its ray's first sample
+    /// with extinction, as the chain's earlier enhancers leave it (volume
+    /// space, its direction's x/y/z as red/green/blue from [−1, 1]),
+    /// opaque; transparent where the ray meets no extinction.
+    GradientDirection,
     /// Diagnostic: each pixel shows its ray's final direction (volume space,
     /// x/y/z as red/green/blue from [−1, 1]), opaque — how refraction is
     /// checked against Snell's law.
@@ -117,14 +128,114 @@ pub struct Probe {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BandPicker {
-    /// b₀ … b₃, data values.
+    /// b₀ … b₃, data values (ignored where `points` is given).
+    #[serde(default)]
     pub band: [f64; 4],
+    /// The band taken from the scene's transfer function by index: its
+    /// control points i ..= j are the plateau [b₁, b₂], their neighbours
+    /// i − 1 and j + 1 the ramps' feet b₀ and b₃ (a peak of the function,
+    /// one tissue class, is `[i, i]`). Indices past the function's last
+    /// point take the last.
+    #[serde(default)]
+    pub points: Option<[usize; 2]>,
     /// Looking against it, only the band is seen.
     #[serde(default = "default_axis")]
     pub axis: [f64; 3],
     /// a_l, a_h of ω_a, over the cosine between the view and the axis.
     #[serde(default = "default_alignment")]
     pub alignment: [f64; 2],
+}
+
+/// G10 §3 "multilevel shading effects, such as … normal unsharp masking":
+/// where a segment has extinction, its gradient g becomes
+///   g + λ·(g − g_c),
+/// g_c the gradient of a coarser level's data at the same point (the
+/// leaf's parent for `level` 1, its grandparent for 2; the finer one where
+/// that level is not resident). The gradient is linear in the data, so this
+/// is the gradient of the unsharp-masked volume s + λ·(s − s_c): detail
+/// finer than the coarser level's voxel is amplified by 1 + λ, the shape it
+/// sits on is kept. Shading and every later enhancer see the masked
+/// gradient. λ = 0 is plain shading, bit for bit.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UnsharpGradient {
+    /// λ, in [0, 10].
+    #[serde(default = "one")]
+    pub strength: f64,
+    /// How many levels coarser the smooth gradient is: 1 or 2.
+    #[serde(default = "one_level")]
+    pub level: u32,
+}
+
+/// G10 §3 "exaggerated shading [Rusinkiewicz, Burns and DeCarlo 2006]":
+/// with n₀, n₁, n₂ the outward normals −∇s/‖∇s‖ of the leaf, its parent and
+/// its grandparent at a sample, l the light (display space, towards the
+/// light) and l_i = l − (l·n_i)n_i normalised (the light turned into the
+/// plane of the next coarser scale),
+///   E = ½ + ½·(k₀·clamp(a·n₀·l₁) + k₁·clamp(a·n₁·l₂) + k_b·clamp(n₂·l)),
+/// clamp to [−1, 1], weights k normalised to sum 1 (their Eq. 2: each term
+/// shades a scale's detail relative to the next coarser one, lit from the
+/// side whatever the surface's orientation; the base term is the coarse
+/// shape lit as usual). The shade is ambient + diffuse·E of the scene's
+/// material, blended with the plain shade (Phong, or none where the scene
+/// is unshaded) by `strength`: 0 is plain shading, bit for bit. The light
+/// is fixed in display space, so every viewer of a light field display sees
+/// the same shading.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExaggeratedShading {
+    /// Blend from the plain shade (0) to exaggerated shading (1).
+    #[serde(default = "one")]
+    pub strength: f64,
+    /// a, how sharply the detail terms switch from dark to light, (0, 1000].
+    #[serde(default = "default_contrast")]
+    pub contrast: f64,
+    /// Towards the light, display space.
+    #[serde(default = "default_light")]
+    pub light: [f64; 3],
+    /// k₀, k₁, k_b: the finest detail, the middle scale, the base shape.
+    #[serde(default = "default_weights")]
+    pub weights: [f64; 3],
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn one_level() -> u32 {
+    1
+}
+
+fn default_contrast() -> f64 {
+    4.0
+}
+
+fn default_light() -> [f64; 3] {
+    [-0.4, 0.6, 1.0]
+}
+
+fn default_weights() -> [f64; 3] {
+    [0.3, 0.3, 0.4]
+}
+
+impl Default for UnsharpGradient {
+    fn default() -> Self {
+        UnsharpGradient {
+            strength: one(),
+            level: one_level(),
+        }
+    }
+}
+
+impl Default for ExaggeratedShading {
+    fn default() -> Self {
+        ExaggeratedShading {
+            strength: one(),
+            contrast: default_contrast(),
+            light: default_light(),
+            weights: default_weights(),
+        }
+    }
 }
 
 fn default_axis() -> [f64; 3] {
@@ -138,6 +249,35 @@ fn default_alignment() -> [f64; 2] {
 
 fn default_gradient() -> [f64; 2] {
     [0.02, 0.2]
+}
+
+impl BandPicker {
+    /// The band's four data values: `band`, or taken from the values of
+    /// the transfer function's control points (`points`).
+    pub fn values(&self, tf_values: &[f64]) -> [f64; 4] {
+        match self.points {
+            Some([i, j]) if !tf_values.is_empty() => {
+                let last = tf_values.len() - 1;
+                let (i, j) = (i.min(last), j.min(last));
+                [
+                    tf_values[i.saturating_sub(1)],
+                    tf_values[i],
+                    tf_values[j],
+                    tf_values[(j + 1).min(last)],
+                ]
+            }
+            _ => self.band,
+        }
+    }
+
+    /// With `points` resolved against the transfer function's values: the
+    /// band the kernel and the overlay use.
+    pub fn resolved(&self, tf_values: &[f64]) -> BandPicker {
+        BandPicker {
+            band: self.values(tf_values),
+            ..*self
+        }
+    }
 }
 
 impl Probe {
@@ -170,6 +310,9 @@ enum ToolTable {
     ClipPlane(ClipPlane),
     Probe(Probe),
     BandPicker(BandPicker),
+    UnsharpGradient(UnsharpGradient),
+    ExaggeratedShading(ExaggeratedShading),
+    GradientDirection,
     ExitDirection,
 }
 
@@ -180,6 +323,9 @@ impl From<ToolTable> for Tool {
             ToolTable::ClipPlane(c) => Tool::ClipPlane(c),
             ToolTable::Probe(p) => Tool::Probe(p),
             ToolTable::BandPicker(b) => Tool::BandPicker(b),
+            ToolTable::UnsharpGradient(u) => Tool::UnsharpGradient(u),
+            ToolTable::ExaggeratedShading(e) => Tool::ExaggeratedShading(e),
+            ToolTable::GradientDirection => Tool::GradientDirection,
             ToolTable::ExitDirection => Tool::ExitDirection,
         }
     }
@@ -192,6 +338,9 @@ impl From<Tool> for ToolTable {
             Tool::ClipPlane(c) => ToolTable::ClipPlane(c),
             Tool::Probe(p) => ToolTable::Probe(p),
             Tool::BandPicker(b) => ToolTable::BandPicker(b),
+            Tool::UnsharpGradient(u) => ToolTable::UnsharpGradient(u),
+            Tool::ExaggeratedShading(e) => ToolTable::ExaggeratedShading(e),
+            Tool::GradientDirection => ToolTable::GradientDirection,
             Tool::ExitDirection => ToolTable::ExitDirection,
         }
     }
@@ -230,6 +379,9 @@ pub enum EnhancerKind {
     ClipPlane,
     Probe,
     BandPicker,
+    UnsharpGradient,
+    ExaggeratedShading,
+    GradientDirection,
     ExitDirection,
 }
 
@@ -253,6 +405,13 @@ pub struct EnhancerSpec {
     /// Sets the sample's importance (up to 1, above the transfer
     /// function's largest: MImDA's termination test allows for it).
     pub sets_importance: bool,
+    /// Reads the gradients of the leaf's parent and grandparent at the
+    /// sample (`gradient_up`, `gradient_up2`: six fetches each), likewise
+    /// only where `ENH_active`.
+    pub coarse_gradients: bool,
+    /// Sets the sample's shade (`shade`), which then replaces the kernel's
+    /// own (Phong, or 1 unshaded).
+    pub shades: bool,
     /// Adds breaks to the ray (`add_break`): no segment straddles them.
     pub breaks: bool,
     /// Changes a segment's optics (`alpha_scale`, `alpha_mix`,
@@ -267,13 +426,15 @@ pub struct EnhancerSpec {
 }
 
 /// Every enhancer, indexed by [`EnhancerKind`].
-pub const ENHANCERS: [EnhancerSpec; 5] = [
+pub const ENHANCERS: [EnhancerSpec; 8] = [
     EnhancerSpec {
         kind: EnhancerKind::PassThrough,
         name: "pass-through",
         gradient: false,
         importance: false,
         sets_importance: false,
+        coarse_gradients: false,
+        shades: false,
         breaks: false,
         optics: false,
         adds_opacity: false,
@@ -284,6 +445,8 @@ pub const ENHANCERS: [EnhancerSpec; 5] = [
         gradient: false,
         importance: false,
         sets_importance: false,
+        coarse_gradients: false,
+        shades: false,
         breaks: true,
         optics: true,
         // The emphasis band blends towards full opacity only where τ̄ > 0.
@@ -295,6 +458,8 @@ pub const ENHANCERS: [EnhancerSpec; 5] = [
         gradient: true,
         importance: true,
         sets_importance: false,
+        coarse_gradients: false,
+        shades: false,
         breaks: true,
         optics: true,
         // μ(α) and μ(i) are at most 1 (Eqs. 4–5).
@@ -307,9 +472,49 @@ pub const ENHANCERS: [EnhancerSpec; 5] = [
         // It sets the importance; it does not read it.
         importance: false,
         sets_importance: true,
+        coarse_gradients: false,
+        shades: false,
         breaks: false,
         optics: true,
         // Its factor on opacity is at most 1.
+        adds_opacity: false,
+    },
+    EnhancerSpec {
+        kind: EnhancerKind::UnsharpGradient,
+        name: "unsharp-gradient",
+        gradient: true,
+        importance: false,
+        sets_importance: false,
+        coarse_gradients: true,
+        shades: false,
+        breaks: false,
+        optics: false,
+        adds_opacity: false,
+    },
+    EnhancerSpec {
+        kind: EnhancerKind::ExaggeratedShading,
+        name: "exaggerated-shading",
+        gradient: true,
+        importance: false,
+        sets_importance: false,
+        coarse_gradients: true,
+        shades: true,
+        breaks: false,
+        optics: false,
+        // It shades segments with extinction only.
+        adds_opacity: false,
+    },
+    EnhancerSpec {
+        kind: EnhancerKind::GradientDirection,
+        name: "gradient-direction",
+        gradient: true,
+        importance: false,
+        sets_importance: false,
+        coarse_gradients: false,
+        shades: false,
+        breaks: false,
+        optics: false,
+        // It shows only rays that meet extinction.
         adds_opacity: false,
     },
     EnhancerSpec {
@@ -318,6 +523,8 @@ pub const ENHANCERS: [EnhancerSpec; 5] = [
         gradient: false,
         importance: false,
         sets_importance: false,
+        coarse_gradients: false,
+        shades: false,
         breaks: false,
         optics: false,
         adds_opacity: true,
@@ -325,11 +532,14 @@ pub const ENHANCERS: [EnhancerSpec; 5] = [
 ];
 
 impl EnhancerKind {
-    pub const ALL: [EnhancerKind; 5] = [
+    pub const ALL: [EnhancerKind; 8] = [
         EnhancerKind::PassThrough,
         EnhancerKind::ClipPlane,
         EnhancerKind::Probe,
         EnhancerKind::BandPicker,
+        EnhancerKind::UnsharpGradient,
+        EnhancerKind::ExaggeratedShading,
+        EnhancerKind::GradientDirection,
         EnhancerKind::ExitDirection,
     ];
 
@@ -364,6 +574,9 @@ impl Tool {
             Tool::ClipPlane(_) => EnhancerKind::ClipPlane,
             Tool::Probe(_) => EnhancerKind::Probe,
             Tool::BandPicker(_) => EnhancerKind::BandPicker,
+            Tool::UnsharpGradient(_) => EnhancerKind::UnsharpGradient,
+            Tool::ExaggeratedShading(_) => EnhancerKind::ExaggeratedShading,
+            Tool::GradientDirection => EnhancerKind::GradientDirection,
             Tool::ExitDirection => EnhancerKind::ExitDirection,
         }
     }
@@ -373,7 +586,24 @@ impl Tool {
     pub fn pack(&self, ctx: &PackContext) -> [[f32; 4]; 4] {
         let f = |x: f64| x as f32;
         match self {
-            Tool::PassThrough | Tool::ExitDirection => [[0.0; 4]; 4],
+            Tool::PassThrough | Tool::ExitDirection | Tool::GradientDirection => [[0.0; 4]; 4],
+            Tool::UnsharpGradient(u) => [
+                [f(u.strength), u.level as f32, 0.0, 0.0],
+                [0.0; 4],
+                [0.0; 4],
+                [0.0; 4],
+            ],
+            Tool::ExaggeratedShading(e) => {
+                let l = ctx.placement.rotation().transpose() * DVec3::from(e.light).normalize();
+                let sum: f64 = e.weights.iter().sum();
+                let k = e.weights.map(|w| f(w / sum));
+                [
+                    [f(l.x), f(l.y), f(l.z), f(e.strength)],
+                    [k[0], k[1], k[2], f(e.contrast)],
+                    [0.0; 4],
+                    [0.0; 4],
+                ]
+            }
             Tool::ClipPlane(c) => {
                 let v = c.in_volume(&ctx.placement, ctx.extent);
                 [
@@ -434,8 +664,8 @@ impl Tool {
     }
 
     /// Whether the tool can change anything in the volume's box: a clip
-    /// plane whose cut-away side and band miss the box, or a probe whose
-    /// sphere misses it, changes no ray (its breaks fall outside the box,
+    /// plane whose cut-away side and band miss the box, a probe whose
+    /// sphere misses it, or multilevel shading at strength 0 changes no ray (its breaks fall outside the box,
     /// where a ray integrates nothing), and the renderer leaves it out of
     /// the kernel.
     pub fn acts_on(&self, ctx: &PackContext) -> bool {
@@ -459,7 +689,15 @@ impl Tool {
                 let nearest = c.clamp(DVec3::ZERO, DVec3::from(ctx.extent));
                 (nearest - c).length() < r
             }
-            Tool::PassThrough | Tool::BandPicker(_) | Tool::ExitDirection => true,
+            // At strength 0 multilevel shading is plain shading: left out,
+            // it costs nothing (in the kernel it would read two coarser
+            // gradients a shaded segment).
+            Tool::UnsharpGradient(u) => u.strength > 0.0,
+            Tool::ExaggeratedShading(e) => e.strength > 0.0,
+            Tool::PassThrough
+            | Tool::BandPicker(_)
+            | Tool::GradientDirection
+            | Tool::ExitDirection => true,
         }
     }
 
@@ -479,8 +717,38 @@ impl Tool {
             }
             Ok(())
         };
+        let within = |v: f64, lo: f64, hi: f64, field: &str| -> Result<()> {
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                bail!("{what}: {field} must be in [{lo}, {hi}] (got {v})");
+            }
+            Ok(())
+        };
         match self {
-            Tool::PassThrough | Tool::ExitDirection => Ok(()),
+            Tool::PassThrough | Tool::ExitDirection | Tool::GradientDirection => Ok(()),
+            Tool::UnsharpGradient(u) => {
+                within(u.strength, 0.0, 10.0, "strength")?;
+                if !(1..=2).contains(&u.level) {
+                    bail!("{what}: level must be 1 or 2 (got {})", u.level);
+                }
+                Ok(())
+            }
+            Tool::ExaggeratedShading(e) => {
+                within(e.strength, 0.0, 1.0, "strength")?;
+                if !(e.contrast.is_finite() && e.contrast > 0.0 && e.contrast <= 1000.0) {
+                    bail!("{what}: contrast must be in (0, 1000] (got {})", e.contrast);
+                }
+                direction(&e.light, "light")?;
+                if !(finite(&e.weights)
+                    && e.weights.iter().all(|&w| (0.0..=1e3).contains(&w))
+                    && e.weights.iter().sum::<f64>() > 1e-9)
+                {
+                    bail!(
+                        "{what}: weights must be three finite values in [0, 1000], not all 0 (got {:?})",
+                        e.weights
+                    );
+                }
+                Ok(())
+            }
             Tool::ClipPlane(c) => {
                 if !finite(&c.point) {
                     bail!("{what}: point must be finite (got {:?})", c.point);
@@ -504,6 +772,17 @@ impl Tool {
                 direction(&p.axis, "axis")?;
                 band(&p.alignment, "alignment", "a_l, a_h")?;
                 band(&p.gradient, "gradient", "g_l, g_h")
+            }
+            Tool::BandPicker(b) if b.points.is_some() => {
+                let [i, j] = b.points.unwrap_or_default();
+                if i > j || j > 4096 {
+                    bail!(
+                        "{what}: points must be two control point indices i ≤ j of the transfer function (got {:?})",
+                        [i, j]
+                    );
+                }
+                direction(&b.axis, "axis")?;
+                band(&b.alignment, "alignment", "a_l, a_h")
             }
             Tool::BandPicker(b) => {
                 let v = b.band;
@@ -662,6 +941,49 @@ mod tests {
         }
         let four = vec![Tool::PassThrough; 4];
         assert!(check_tools(&four, Path::new("s.toml")).is_err());
+    }
+}
+
+#[cfg(test)]
+mod band_tests {
+    use super::*;
+
+    #[test]
+    fn a_band_by_index_takes_the_points_and_their_neighbours() {
+        let b = BandPicker {
+            band: [0.0; 4],
+            points: Some([1, 2]),
+            axis: [0.0, 0.0, 1.0],
+            alignment: [0.7, 0.95],
+        };
+        let v = [0.0, 25.0, 75.0, 105.0, 125.0];
+        assert_eq!(b.values(&v), [0.0, 25.0, 75.0, 105.0]);
+        // At the ends the feet are the end points; past the end, the last.
+        let first = BandPicker {
+            points: Some([0, 0]),
+            ..b
+        };
+        assert_eq!(first.values(&v), [0.0, 0.0, 0.0, 25.0]);
+        let past = BandPicker {
+            points: Some([7, 9]),
+            ..b
+        };
+        assert_eq!(past.values(&v), [105.0, 125.0, 125.0, 125.0]);
+        let bad = Tool::BandPicker(BandPicker {
+            points: Some([3, 1]),
+            ..b
+        });
+        assert!(bad
+            .check("s.toml")
+            .unwrap_err()
+            .to_string()
+            .contains("points"));
+        // Parsed from a scene without a band.
+        let t: ToolTable = toml::from_str("kind = \"band-picker\"\npoints = [3, 3]\n").unwrap();
+        let Tool::BandPicker(p) = Tool::from(t) else {
+            panic!("not a band picker")
+        };
+        assert_eq!(p.values(&v), [75.0, 105.0, 105.0, 125.0]);
     }
 }
 

@@ -264,6 +264,8 @@ impl Sent {
         state.observer = st.observer;
         state.eta = st.eta;
         state.render.gamma = sc.gamma(frame, scene.render.gamma);
+        state.render.overlay.cursor = sc.cursor(frame, scene.render.overlay.cursor);
+        state.render.overlay.show = sc.overlay(frame, scene.render.overlay.show);
         state.render.accuracy = sc.accuracy(frame, scene.render.accuracy);
         state.render.step_factor = sc.step_factor(frame, scene.render.step_factor);
         // Tools are sent when they change, not every frame.

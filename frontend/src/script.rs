@@ -101,6 +101,13 @@ pub struct Key {
     /// remove tools). `tool` keys then index this set.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tools: Option<ToolSet>,
+    /// The 3D cursor of the overlay (m, display space; interpolated).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cursor: Option<[f64; 3]>,
+    /// Whether the tools' geometry and the cursor are drawn (from this
+    /// frame on).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overlay: Option<bool>,
 }
 
 /// A tool set as a script writes it.
@@ -172,6 +179,9 @@ pub struct Script {
     gamma: Track<1>,
     accuracy: Track<1>,
     step_factor: Track<1>,
+    cursor: Track<3>,
+    /// (first frame, on) of each overlay switch.
+    overlay: Vec<(u64, bool)>,
     /// (first frame, file) of each transfer function switch.
     tfs: Vec<(u64, PathBuf)>,
     /// Per tool index of the scene (or of the tool set in force).
@@ -211,6 +221,8 @@ impl Script {
             gamma: Track::default(),
             accuracy: Track::default(),
             step_factor: Track::default(),
+            cursor: Track::default(),
+            overlay: Vec::new(),
             tfs: Vec::new(),
             tools: Vec::new(),
             tool_sets: Vec::new(),
@@ -256,6 +268,15 @@ impl Script {
                     bail!("{at}: eta must be in [0, 1] (got {e})");
                 }
                 s.eta.keys.push((k.frame, [e]));
+            }
+            if let Some(c) = k.cursor {
+                if !c.iter().all(|x| x.is_finite() && x.abs() <= 10.0) {
+                    bail!("{at}: cursor must be finite and within 10 m (got {c:?})");
+                }
+                s.cursor.keys.push((k.frame, c));
+            }
+            if let Some(on) = k.overlay {
+                s.overlay.push((k.frame, on));
             }
             if let Some(g) = k.gamma {
                 if !(0.0..=1.0).contains(&g) {
@@ -334,6 +355,24 @@ impl Script {
     }
 
     /// MImDA's γ at `frame` (the scene's where the script sets none).
+    /// The overlay's cursor at `frame` (the scene's where no key sets it).
+    pub fn cursor(&self, frame: u64, scene: Option<[f64; 3]>) -> Option<[f64; 3]> {
+        if self.cursor.keys.is_empty() {
+            scene
+        } else {
+            Some(self.cursor.at(frame, scene.unwrap_or([0.0; 3])))
+        }
+    }
+
+    /// Whether the overlay is drawn at `frame`.
+    pub fn overlay(&self, frame: u64, scene: bool) -> bool {
+        self.overlay
+            .iter()
+            .rev()
+            .find(|(f, _)| *f <= frame)
+            .map_or(scene, |(_, on)| *on)
+    }
+
     pub fn gamma(&self, frame: u64, scene: f64) -> f64 {
         self.gamma.at(frame, [scene])[0]
     }

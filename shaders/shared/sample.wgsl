@@ -11,6 +11,9 @@ struct Sample {
     scalar: f32,          // s at the segment's end
     scalar_prev: f32,     // s at its start
     gradient: vec3<f32>,  // ∇s at the midpoint (computed when an enhancer reads it)
+    gradient_up: vec3<f32>,  // ∇s of the leaf's parent there (idem, COARSE_GRADIENTS; else ∇s)
+    gradient_up2: vec3<f32>, // ∇s of its grandparent (idem; else gradient_up)
+    shade: f32,           // shading factor set by tools (< 0: none, the kernel's own)
     tau: f32,             // pre-integrated extinction τ̄
     emission: vec3<f32>,  // pre-integrated extinction-weighted colour k̃
     importance: f32,      // pre-integrated importance ι (MImDA, refraction kernels)

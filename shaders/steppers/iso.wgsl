@@ -56,14 +56,21 @@ fn iso_hit(acc: ptr<function, Acc>, hit_t: ptr<function, f32>, leaf: Leaf, o: ve
     smp.alpha_scale = 1.0;
     smp.alpha_mix = 0.0;
     smp.material = frame.light;
+    smp.shade = -1.0;
     if (NEEDS_GRADIENT) {
+        // The isosurface reads no coarser level: multilevel shading sees
+        // the leaf's gradient at every scale.
         smp.gradient = gradient(leaf, smp.pos);
+        smp.gradient_up = smp.gradient;
+        smp.gradient_up2 = smp.gradient;
     }
     chain_sample(&smp);
     let alpha = clamp(mix(smp.alpha_scale, 1.0, smp.alpha_mix), 0.0, 1.0);
     if (alpha > 0.0) {
         var shade = 1.0;
-        if (SHADING) {
+        if (TOOL_SHADES && smp.shade >= 0.0) {
+            shade = smp.shade;
+        } else if (SHADING) {
             shade = phong(gradient(leaf, smp.pos), d, smp.material);
         }
         over(acc, vec4<f32>(max(smp.emission, vec3<f32>(0.0)) * shade * alpha, alpha));

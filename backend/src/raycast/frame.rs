@@ -88,7 +88,9 @@ const FEEDBACK: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
 const IMAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_SRC)
     .union(wgpu::BufferUsages::COPY_DST);
-const PREDICTION: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE;
+// Cleared each frame when it records depths (`RenderSettings::record_depth`).
+const PREDICTION: wgpu::BufferUsages =
+    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_DST);
 /// Bytes of the sample counters.
 pub(super) const COUNTERS: u64 = 16;
 const STAGING: wgpu::BufferUsages =

@@ -155,6 +155,13 @@ impl Raycaster {
         &self.frame.image.buffer
     }
 
+    /// Each pixel's depth where the frame recorded it
+    /// (`RenderSettings::record_depth`; the prediction buffer, which the
+    /// isosurface fills with its hits), in the views' order.
+    pub fn depth_buffer(&self) -> &wgpu::Buffer {
+        &self.frame.prediction.buffer
+    }
+
     /// Per-frame buffers and bind groups made so far.
     pub fn frame_buffer_counts(&self) -> FrameBufferCounts {
         self.frame.made
@@ -205,6 +212,10 @@ impl Raycaster {
         };
         let fb_size = index.len() as u64 * 4;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
+        if settings.record_depth && settings.predict[0] == 0.0 {
+            // Tiles left out write no depth: theirs reads 0, no surface.
+            enc.clear_buffer(&self.frame.prediction.buffer, 0, None);
+        }
         let passes = [
             (tool_pipeline.as_ref(), tool_tiles),
             (Some(&pipeline), tiles.len() - tool_tiles),

@@ -28,6 +28,11 @@ pub struct RenderSettings {
     pub reconstruct: Option<bool>,
     /// Prediction buffer (B10 §4): mode (0 off, 1 full traversal, 2
     /// predicted), local window (data units), κ low, κ high.
+    /// Record each pixel's depth in the prediction buffer (the ray
+    /// parameter, volume units from the ray's origin, where its opacity
+    /// first reaches ½; −1 where it never does; 0 in tiles left out): the
+    /// overlay's depth combination (G10 §5).
+    pub record_depth: bool,
     pub predict: [f32; 4],
     /// The enhancers' constant parameters, in chain order.
     pub tools: [ToolParams; MAX_ENHANCERS],
@@ -90,6 +95,7 @@ impl Default for RenderSettings {
             subframe: None,
             reconstruct: None,
             predict: [0.0; 4],
+            record_depth: false,
             tools: [ToolParams::default(); MAX_ENHANCERS],
             tool_regions: Vec::new(),
             macrocells: true,

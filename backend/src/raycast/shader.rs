@@ -79,6 +79,18 @@ const ENHANCER_FILES: &[(&str, &str)] = &[
         include_str!("../../../shaders/enhancers/band-picker.wgsl"),
     ),
     (
+        "unsharp-gradient",
+        include_str!("../../../shaders/enhancers/unsharp-gradient.wgsl"),
+    ),
+    (
+        "exaggerated-shading",
+        include_str!("../../../shaders/enhancers/exaggerated-shading.wgsl"),
+    ),
+    (
+        "gradient-direction",
+        include_str!("../../../shaders/enhancers/gradient-direction.wgsl"),
+    ),
+    (
         "exit-direction",
         include_str!("../../../shaders/enhancers/exit-direction.wgsl"),
     ),
@@ -156,7 +168,7 @@ impl KernelKey {
     /// enhancer is instantiated under its own names and meets the others
     /// only through the chain's constants (the OR of their declarations)
     /// and the order of calls, so the pairs meet every interaction of two
-    /// kinds and the full chains every slot, without the 4³ chains × 5
+    /// kinds and the full chains every slot, without the 8³ chains × 5
     /// steppers of [`KernelKey::all`].
     pub fn covering() -> Vec<KernelKey> {
         let mut chains: Vec<Vec<EnhancerKind>> = vec![vec![]];
@@ -165,9 +177,22 @@ impl KernelKey {
             chains.push(vec![k; MAX_ENHANCERS]);
         }
         let mut out = Self::with_steppers(&chains);
+        // The pass-through compiles to nothing and the gradient diagnostic
+        // only reads: under MImDA with refraction their pairs meet nothing
+        // that DVR's pairs and their full chains have not.
+        let plain = |k: &EnhancerKind| {
+            !matches!(
+                k,
+                EnhancerKind::PassThrough | EnhancerKind::GradientDirection
+            )
+        };
         for (mimda, refraction) in [(false, false), (true, true)] {
-            for a in EnhancerKind::ALL {
-                for b in EnhancerKind::ALL {
+            let kinds: Vec<EnhancerKind> = EnhancerKind::ALL
+                .into_iter()
+                .filter(|k| !mimda || plain(k))
+                .collect();
+            for &a in &kinds {
+                for &b in &kinds {
                     out.push(KernelKey {
                         mimda,
                         refraction,
@@ -270,6 +295,12 @@ impl KernelKey {
         let _ = writeln!(s, "const TOOL_AUX: bool = {};", any(|e| e.importance));
         let _ = writeln!(
             s,
+            "const COARSE_GRADIENTS: bool = {};",
+            any(|e| e.coarse_gradients)
+        );
+        let _ = writeln!(s, "const TOOL_SHADES: bool = {};", any(|e| e.shades));
+        let _ = writeln!(
+            s,
             "const TOOL_IMPORTANCE: bool = {};",
             any(|e| e.sets_importance)
         );
@@ -287,7 +318,7 @@ impl KernelKey {
         let active: Vec<String> = self
             .specs()
             .enumerate()
-            .filter(|(_, e)| e.gradient || e.importance)
+            .filter(|(_, e)| e.gradient || e.importance || e.coarse_gradients)
             .map(|(i, _)| format!("enh{i}_active(smp)"))
             .collect();
         let _ = writeln!(
@@ -410,63 +441,79 @@ mod tests {
         let keys = KernelKey::covering();
         let kinds = EnhancerKind::ALL.len();
         // (DVR/MImDA × refraction off/on, and the isosurface) × (no
-        // enhancer, each kind alone, each kind three times), and every
-        // ordered pair under two steppers.
+        // enhancer, each kind alone, each kind three times), every ordered
+        // pair under DVR and those of all but two under MImDA with
+        // refraction.
         assert_eq!(
             keys.len(),
-            (2 * 2 + 1) * (1 + 2 * kinds) + 2 * kinds * kinds
+            (2 * 2 + 1) * (1 + 2 * kinds) + kinds * kinds + (kinds - 2) * (kinds - 2)
         );
-        for key in &keys {
-            let what = format!("{key:?}");
-            let src = kernel(key).unwrap();
-            let module = parse(&what, &src);
-            let info = validate(&what, &src, &module);
-            for (_, o) in module.overrides.iter() {
-                let name = o.name.clone().unwrap();
-                assert!(
-                    OVERRIDES.contains(&name.as_str()),
-                    "override {name} is not listed"
-                );
+        // Spread over the cores: naga is single-threaded.
+        let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
+        std::thread::scope(|scope| {
+            for t in 0..threads {
+                let keys = &keys;
+                scope.spawn(move || {
+                    for key in keys.iter().skip(t).step_by(threads) {
+                        validate_key(key);
+                    }
+                });
             }
-            // The override combinations of the plain and the fullest
-            // kernels: every combination of all but the last, which takes
-            // the parity of the others' values, so that it meets both
-            // values of every other override and every pair of them. The
-            // three pre-integration paths, of which a pipeline sets at most
-            // one, count as one override of four values (two bits), and
-            // TF_PIECES, a count, takes its largest value (the whole
-            // uniform array).
-            const PATHS: [&str; 3] = ["END_PREINT", "GRID_PREINT", "ANALYTIC_PREINT"];
-            if key.enhancers.len() == MAX_ENHANCERS || key.enhancers.is_empty() {
-                let flags: Vec<&str> = OVERRIDES
-                    .iter()
-                    .copied()
-                    .filter(|n| *n != "TF_PIECES" && !PATHS.contains(n))
-                    .collect();
-                // The path's two bits come first, then the flags.
-                let n = 2 + flags.len() - 1;
-                for bits in 0..1u32 << n {
-                    let mut constants = naga::back::PipelineConstants::default();
-                    let bits = bits | (bits.count_ones() & 1) << n;
-                    for (i, p) in PATHS.iter().enumerate() {
-                        constants.insert(p.to_string(), f64::from(bits & 3 == i as u32 + 1));
-                    }
-                    for (i, f) in flags.iter().enumerate() {
-                        constants.insert(f.to_string(), ((bits >> (i + 2)) & 1) as f64);
-                    }
-                    constants.insert(
-                        "TF_PIECES".to_string(),
-                        parallax_common::tf::closed::MAX_PIECES as f64,
-                    );
-                    let (m, _) = naga::back::pipeline_constants::process_overrides(
-                        &module,
-                        &info,
-                        Some((naga::ShaderStage::Compute, "main")),
-                        &constants,
-                    )
-                    .unwrap_or_else(|e| panic!("{what} {constants:?}: {e}"));
-                    validate(&what, &src, &m);
+        });
+    }
+
+    /// One kernel of [`every_kernel_combination_validates_without_a_gpu`]
+    /// and, for the empty and full chains, its override values.
+    fn validate_key(key: &KernelKey) {
+        let what = format!("{key:?}");
+        let src = kernel(key).unwrap();
+        let module = parse(&what, &src);
+        let info = validate(&what, &src, &module);
+        for (_, o) in module.overrides.iter() {
+            let name = o.name.clone().unwrap();
+            assert!(
+                OVERRIDES.contains(&name.as_str()),
+                "override {name} is not listed"
+            );
+        }
+        // The override combinations of the plain and the fullest
+        // kernels: every combination of all but the last, which takes
+        // the parity of the others' values, so that it meets both
+        // values of every other override and every pair of them. The
+        // three pre-integration paths, of which a pipeline sets at most
+        // one, count as one override of four values (two bits), and
+        // TF_PIECES, a count, takes its largest value (the whole
+        // uniform array).
+        const PATHS: [&str; 3] = ["END_PREINT", "GRID_PREINT", "ANALYTIC_PREINT"];
+        if key.enhancers.len() == MAX_ENHANCERS || key.enhancers.is_empty() {
+            let flags: Vec<&str> = OVERRIDES
+                .iter()
+                .copied()
+                .filter(|n| *n != "TF_PIECES" && !PATHS.contains(n))
+                .collect();
+            // The path's two bits come first, then the flags.
+            let n = 2 + flags.len() - 1;
+            for bits in 0..1u32 << n {
+                let mut constants = naga::back::PipelineConstants::default();
+                let bits = bits | (bits.count_ones() & 1) << n;
+                for (i, p) in PATHS.iter().enumerate() {
+                    constants.insert(p.to_string(), f64::from(bits & 3 == i as u32 + 1));
                 }
+                for (i, f) in flags.iter().enumerate() {
+                    constants.insert(f.to_string(), ((bits >> (i + 2)) & 1) as f64);
+                }
+                constants.insert(
+                    "TF_PIECES".to_string(),
+                    parallax_common::tf::closed::MAX_PIECES as f64,
+                );
+                let (m, _) = naga::back::pipeline_constants::process_overrides(
+                    &module,
+                    &info,
+                    Some((naga::ShaderStage::Compute, "main")),
+                    &constants,
+                )
+                .unwrap_or_else(|e| panic!("{what} {constants:?}: {e}"));
+                validate(&what, &src, &m);
             }
         }
     }

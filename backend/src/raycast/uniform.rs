@@ -66,7 +66,12 @@ pub(super) fn frame_uniform(
             tf.prefix_offset,
         ],
         pool: [pool.grid[0], pool.grid[1], pool.grid[2], pool.side],
-        optics: [s.gamma, tf.max_importance, 0.0, 0.0],
+        optics: [
+            s.gamma,
+            tf.max_importance,
+            if s.record_depth { 1.0 } else { 0.0 },
+            0.0,
+        ],
         aux: [
             tf.aux_base,
             tf.aux_prefix,

@@ -345,6 +345,8 @@ fn frame_loop(
         render.accuracy = state.accuracy;
         render.step_factor = state.step_factor;
         render.gamma = state.gamma;
+        render.overlay.show = state.overlay;
+        render.overlay.cursor = state.cursor;
         let fs = FrameState {
             frame,
             placement: state.placement,

@@ -134,6 +134,8 @@ fn key_of(r: &Recorded, tf_file: Option<PathBuf>) -> Key {
         // The whole tool set: a page may have added or removed tools.
         tool: Vec::new(),
         tools: Some(ToolSet(r.tools.clone())),
+        cursor: s.render.overlay.cursor,
+        overlay: Some(s.render.overlay.show),
     }
 }
 

@@ -29,6 +29,13 @@ pub struct LiveState {
     pub eye_x: f64,
     #[serde(default)]
     pub recording: bool,
+    /// Whether the tools' geometry and the cursor are drawn over the views
+    /// (`render.overlay.show`).
+    #[serde(default)]
+    pub overlay: bool,
+    /// The 3D cursor (m, display space), moved by dragging in the view.
+    #[serde(default)]
+    pub cursor: Option<[f64; 3]>,
 }
 
 /// A transfer function point as the page sends it.
@@ -62,6 +69,13 @@ pub enum ClientMsg {
         accuracy: Option<f64>,
         step_factor: Option<f64>,
         gamma: Option<f64>,
+        /// Draw the tools' geometry and the cursor.
+        #[serde(default)]
+        overlay: Option<bool>,
+    },
+    /// Places the 3D cursor (m, display space), or removes it (null).
+    Cursor {
+        point: Option<[f64; 3]>,
     },
     Tf {
         point: Vec<PointMsg>,
@@ -75,6 +89,12 @@ pub enum ClientMsg {
     /// Removes tool `index`.
     RemoveTool {
         index: usize,
+    },
+    /// Moves tool `from` to place `to` of the chain (enhancers act in
+    /// chain order).
+    MoveTool {
+        from: usize,
+        to: usize,
     },
     Output {
         output: String,
@@ -93,34 +113,14 @@ pub enum ClientMsg {
     Quit,
 }
 
-/// A `tool` message: any of tool `index`'s kind's fields (a clip plane:
-/// point, normal, thickness, context; a probe: center, radius, axis,
-/// alignment, gradient; a band picker: band, axis, alignment).
-#[derive(Clone, Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// A `tool` message: any fields of tool `index`'s kind, as in its
+/// `[[tool]]` table (common/src/tools.rs); a field the kind does not have
+/// is refused by name.
+#[derive(Clone, Debug, Deserialize)]
 pub struct ToolEdit {
-    #[serde(skip_serializing)]
     index: usize,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    point: Option<[f64; 3]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    normal: Option<[f64; 3]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    thickness: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    context: Option<[f64; 2]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    center: Option<[f64; 3]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    radius: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    axis: Option<[f64; 3]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    alignment: Option<[f64; 2]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    gradient: Option<[f64; 2]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    band: Option<[f64; 4]>,
+    #[serde(flatten)]
+    fields: serde_json::Map<String, serde_json::Value>,
 }
 
 /// How far the volume's centre may be from the screen's (m, per axis):
@@ -168,7 +168,13 @@ fn tool_bounds(tool: &Tool, what: &str) -> Result<()> {
                 within(&format!("{what}.band"), x, -1e12, 1e12)?;
             }
         }
-        Tool::PassThrough | Tool::ExitDirection => {}
+        Tool::ExaggeratedShading(e) => {
+            within3(&format!("{what}.light"), e.light, -1e3, 1e3)?;
+        }
+        Tool::PassThrough
+        | Tool::ExitDirection
+        | Tool::GradientDirection
+        | Tool::UnsharpGradient(_) => {}
     }
     Ok(())
 }
@@ -248,6 +254,8 @@ impl LiveState {
             },
             eye_x: display.observer.position[0],
             recording: false,
+            overlay: scene.render.overlay.show,
+            cursor: scene.render.overlay.cursor,
         }
     }
 
@@ -280,7 +288,11 @@ impl LiveState {
                 accuracy,
                 step_factor,
                 gamma,
+                overlay,
             } => {
+                if let Some(on) = overlay {
+                    self.overlay = on;
+                }
                 if let Some(v) = eta {
                     self.eta = within("set.eta", v, 0.0, 1.0)?;
                 }
@@ -313,6 +325,22 @@ impl LiveState {
                     self.tools.len()
                 );
                 self.tools.remove(index);
+            }
+            ClientMsg::MoveTool { from, to } => {
+                let n = self.tools.len();
+                ensure!(
+                    from < n,
+                    "move-tool.from: {from}, the scene has {n} tool(s)"
+                );
+                ensure!(to < n, "move-tool.to: {to}, the scene has {n} tool(s)");
+                let t = self.tools.remove(from);
+                self.tools.insert(to, t);
+            }
+            ClientMsg::Cursor { point } => {
+                if let Some(p) = point {
+                    within3("cursor.point", p, -CENTER_LIMIT, CENTER_LIMIT)?;
+                }
+                self.cursor = point;
             }
             ClientMsg::Output { output, eye_x } => {
                 ensure!(
@@ -367,10 +395,12 @@ impl LiveState {
             .tools
             .get_mut(index)
             .with_context(|| format!("tool.index: {index}, the scene has {n} tool(s)"))?;
+        ensure!(
+            !edit.fields.contains_key("kind"),
+            "tool.kind: a tool's kind does not change; remove it and add another"
+        );
         let mut table = tool_table(tool)?;
-        if let serde_json::Value::Object(fields) = serde_json::to_value(edit)? {
-            table.extend(fields);
-        }
+        table.extend(edit.fields.clone());
         let kind = tool.enhancer().file();
         let edited = tool_from_table(table.into(), &format!("tool {index} ({kind})"))?;
         tool_bounds(&edited, "tool")?;
@@ -403,9 +433,11 @@ impl LiveState {
                 accuracy: Some(s.accuracy),
                 step_factor: Some(s.step_factor),
                 gamma: Some(s.gamma),
+                overlay: Some(s.overlay),
             },
             display,
         )?;
+        next.apply(ClientMsg::Cursor { point: s.cursor }, display)?;
         let n = s.tf.points().len();
         ensure!(
             (2..=MAX_TF_POINTS).contains(&n),
