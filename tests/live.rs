@@ -444,6 +444,33 @@ fn a_websocket_client_drives_the_desktop_view() {
         a.settled(v).await;
         assert_eq!(a.state["cursor"], json!(null));
 
+        // A band grown from a clicked point (region growing, G10 §4): the
+        // band picker's band becomes the picked material's, ordered; a
+        // tool that is not a band picker is refused by name.
+        let v = a
+            .change(json!({"type": "add-tool", "tool": {"kind": "band-picker", "band": [1, 2, 3, 4]}}))
+            .await;
+        a.settled(v).await;
+        a.send(json!({"type": "grow-band", "index": 0, "x": 0.5, "y": 0.5})).await;
+        assert!(a.error().await.contains("not a band picker"));
+        a.send(json!({"type": "grow-band", "index": 1, "x": 0.5, "y": 0.5})).await;
+        while a.state["tools"][1]["band"] == json!([1.0, 2.0, 3.0, 4.0]) {
+            let m = a.next_text().await;
+            assert_ne!(m["type"], "error", "{m}");
+        }
+        let band: Vec<f64> = a.state["tools"][1]["band"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert!(
+            band.windows(2).all(|w| w[0] <= w[1]) && band[0] < band[3],
+            "{band:?}"
+        );
+        let v = a.change(json!({"type": "remove-tool", "index": 1})).await;
+        a.settled(v).await;
+
         // Focus: a click on the volume moves it along z so that the
         // clicked point lies on the screen plane; a click on empty space
         // is refused.

@@ -215,7 +215,14 @@ fn handle(
             let mut stats = render_frame(s, &state)?;
             stats.rank = link.rank();
             if let (Some([origin, dir]), 1) = (state.pick, link.rank()) {
-                stats.pick = s.renderer.pick(&state.placement, origin, dir)?;
+                match state.grow {
+                    Some(tolerance) => {
+                        stats.grown =
+                            s.renderer
+                                .grow_band(&state.placement, origin, dir, tolerance)?;
+                    }
+                    None => stats.pick = s.renderer.pick(&state.placement, origin, dir)?,
+                }
             }
             stats.rss_bytes = parallax_common::resident_bytes();
             link.reply(&stats)?;
@@ -459,6 +466,7 @@ mod tests {
             tools_version: 1,
             stream: Vec::new(),
             pick: None,
+            grow: None,
         });
         let mut link = Scripted {
             inbox: VecDeque::from([

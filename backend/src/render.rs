@@ -77,6 +77,9 @@ pub struct Renderer {
     /// The pool's empty macrocells were marked under another transfer
     /// function, or not kept up while macrocells were off.
     cells_stale: bool,
+    /// The band pickers' value windows the pool's macrocells were marked
+    /// under ([`Renderer::band_windows`]).
+    cell_windows: Vec<(f64, f64)>,
     /// Count the samples each frame takes (`FrameStats::samples`).
     pub count_samples: bool,
     /// Run only the tiles whose rays can meet data (on unless a test
@@ -186,6 +189,7 @@ impl Renderer {
             sync_io: false,
             pick_volume: None,
             cells_stale: false,
+            cell_windows: Vec::new(),
             count_samples: false,
             tile_culling: true,
             lookahead: true,
@@ -268,6 +272,38 @@ impl Renderer {
         Ok(volume.pick(tf, placement, origin, dir, crate::pick::PICK_THRESHOLD))
     }
 
+    /// A band picker's band grown from the point a display-space ray picks
+    /// (where its opacity reaches ½): region growing in the coarse copy
+    /// the picks use, within `tolerance` × the transfer function's value
+    /// span of the point's value ([`crate::pick::PickVolume::grow_band`]).
+    /// None where the ray picks nothing.
+    pub fn grow_band(
+        &mut self,
+        placement: &Placement,
+        origin: [f64; 3],
+        dir: [f64; 3],
+        tolerance: f64,
+    ) -> Result<Option<[f64; 4]>> {
+        let Some(hit) = self.pick(placement, origin, dir)? else {
+            return Ok(None);
+        };
+        let volume = self.pick_volume.as_ref().expect("read by the pick");
+        let extent = volume.extent();
+        let (seed, _) =
+            placement.ray_to_volume(extent, glam::DVec3::from(hit), glam::DVec3::from(dir));
+        let p = self
+            .tf
+            .as_ref()
+            .expect("checked by the pick")
+            .function
+            .points();
+        let span = match (p.first(), p.last()) {
+            (Some(a), Some(b)) if b.value > a.value => b.value - a.value,
+            _ => 1.0,
+        };
+        Ok(volume.grow_band(seed, tolerance * span))
+    }
+
     /// Turns the loader's view-frustum culling on or off (tests compare the
     /// images with and without it).
     pub fn set_frustum_culling(&mut self, on: bool) {
@@ -330,6 +366,58 @@ impl Renderer {
                 t => t.clone(),
             })
             .collect()
+    }
+
+    /// The value windows [b₀, b₃] of the band pickers that act fully on
+    /// every ray of this frame (G10 §4): where ω_a = 1 a segment whose
+    /// values all miss a picker's band gets opacity × 0 (and importance 0),
+    /// exactly nothing, so a node or a macrocell whose value range misses a
+    /// window is empty for this frame — the loader does not load it, the
+    /// tiles and the macrocells skip it. ω_a is 1 where −a·v ≥ a_h; it is
+    /// tested on each view's corner and edge rays (every 1/32 of a side)
+    /// with a margin of 10⁻⁴. DVR and MImDA without refraction only.
+    fn band_windows(
+        &self,
+        placement: &Placement,
+        views: &[View],
+        cfg: &RenderConfig,
+    ) -> Vec<(f64, f64)> {
+        if cfg.mode == Mode::Iso || cfg.refraction {
+            return Vec::new();
+        }
+        let ctx = self.pack_context(placement);
+        let mut out = Vec::new();
+        for t in self.resolved_tools() {
+            let Tool::BandPicker(b) = t else {
+                continue;
+            };
+            if !t.acts_on(&ctx) {
+                continue;
+            }
+            let axis = glam::DVec3::from(b.axis).normalize();
+            let aligned = views.iter().all(|v| {
+                let [w, h] = v.resolution;
+                let (sw, sh) = (w.div_ceil(32).max(1), h.div_ceil(32).max(1));
+                let edge = (0..w)
+                    .step_by(sw as usize)
+                    .chain([w - 1])
+                    .flat_map(|i| [(i, 0), (i, h - 1)])
+                    .chain(
+                        (0..h)
+                            .step_by(sh as usize)
+                            .chain([h - 1])
+                            .flat_map(|j| [(0, j), (w - 1, j)]),
+                    );
+                edge.into_iter().all(|(i, j)| {
+                    let (_, d) = v.ray(i, j);
+                    -axis.dot(d) >= b.alignment[1] + 1e-4
+                })
+            });
+            if aligned {
+                out.push((b.band[0], b.band[3]));
+            }
+        }
+        out
     }
 
     /// Where the volume is and how steep its data can be, for the tools.
@@ -458,7 +546,12 @@ impl Renderer {
         }
         self.loader.set_accuracy(cfg.accuracy);
         let t = Instant::now();
-        let cut = self.refine(frame, views, placement, cfg)?;
+        let windows = self.band_windows(placement, views, cfg);
+        if windows != self.cell_windows {
+            self.cell_windows.clone_from(&windows);
+            self.cells_stale = true;
+        }
+        let cut = self.refine(frame, views, placement, cfg, &windows)?;
         // A brick that fails its read or checksum is not fatal: the loader
         // never asks for it again and its parent stays a leaf (G08 §4 never
         // blocks on data); the frame names it.
@@ -469,7 +562,7 @@ impl Renderer {
         stats.refine_ms = ms(t);
 
         let t = Instant::now();
-        self.upload(&cut, cfg)?;
+        self.upload(&cut, cfg, &windows)?;
         stats.upload_ms = ms(t);
 
         let t = Instant::now();
@@ -567,6 +660,7 @@ impl Renderer {
         views: &[View],
         placement: &Placement,
         cfg: &RenderConfig,
+        windows: &[(f64, f64)],
     ) -> Result<crate::loader::FrameCut> {
         let tf = self
             .tf
@@ -582,7 +676,10 @@ impl Renderer {
         let iso = (cfg.mode == Mode::Iso).then_some(cfg.isovalue).flatten();
         let empty = |lo: f32, hi: f32| match iso {
             Some(v) => !(lo as f64 <= v && v <= hi as f64),
-            None => table.is_empty(lo as f64, hi as f64),
+            None => {
+                table.is_empty(lo as f64, hi as f64)
+                    || outside_windows(windows, lo as f64, hi as f64)
+            }
         };
         let keep = if cfg.reconstruction {
             SUBFRAMES as usize
@@ -616,7 +713,12 @@ impl Renderer {
 
     /// Uploads the cut's new bricks to the pool with their variance (for
     /// the prediction buffer's κ), and marks their empty macrocells.
-    fn upload(&mut self, cut: &crate::loader::FrameCut, cfg: &RenderConfig) -> Result<()> {
+    fn upload(
+        &mut self,
+        cut: &crate::loader::FrameCut,
+        cfg: &RenderConfig,
+        windows: &[(f64, f64)],
+    ) -> Result<()> {
         let tf = self
             .tf
             .as_ref()
@@ -637,8 +739,9 @@ impl Renderer {
                 norm,
             );
             if cfg.macrocells && !self.cells_stale {
-                self.pool
-                    .mark_cells(u.slot, &|lo, hi| tf.empty.is_empty(lo, hi));
+                self.pool.mark_cells(u.slot, &|lo, hi| {
+                    tf.empty.is_empty(lo, hi) || outside_windows(windows, lo, hi)
+                });
             }
         }
         // A scene without macrocells pays nothing for them but the ranges
@@ -646,8 +749,9 @@ impl Renderer {
         if !cfg.macrocells {
             self.cells_stale = true;
         } else if std::mem::take(&mut self.cells_stale) {
-            self.pool
-                .mark_all_cells(&|lo, hi| tf.empty.is_empty(lo, hi));
+            self.pool.mark_all_cells(&|lo, hi| {
+                tf.empty.is_empty(lo, hi) || outside_windows(windows, lo, hi)
+            });
         }
         self.pool.flush_cells(&self.gpu);
         Ok(())
@@ -779,6 +883,12 @@ impl Renderer {
         self.sync_io = sync;
         Ok(last.expect("at least one frame"))
     }
+}
+
+/// Whether the value range [lo, hi] misses one of the band pickers' value
+/// windows (so a band picker that acts fully makes it transparent).
+fn outside_windows(windows: &[(f64, f64)], lo: f64, hi: f64) -> bool {
+    windows.iter().any(|&(b0, b3)| hi < b0 || lo > b3)
 }
 
 fn ms(t: Instant) -> f64 {

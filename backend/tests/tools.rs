@@ -383,6 +383,19 @@ fn the_band_picker_shows_only_its_band_along_its_axis() {
     );
     assert!(a_pixels > 100);
     assert_eq!(a_left, 0, "pixels whose rays meet no band value are empty");
+    // Along its axis the picker acts fully on every ray (ω_a = 1): bricks
+    // whose values all miss its band are empty for the frame, neither
+    // loaded nor marched (A's, and B's rim).
+    let bricks = |tools: &[Tool]| {
+        let mut r = Renderer::new(&db, &cfg).unwrap();
+        r.set_transfer_function(1, &tf).unwrap();
+        r.set_tools(1, tools).unwrap();
+        r.converge(&placement, &[along], &cfg, 40).unwrap();
+        r.resident_bricks().len()
+    };
+    let (without, with) = (bricks(&[]), bricks(std::slice::from_ref(&picker)));
+    eprintln!("band picker along its axis: {with} bricks resident, {without} without it");
+    assert!(with < without, "{with} vs {without}");
     // B's core (values in the band along every ray within 4 px of its
     // centre, at column 33.5, row 15.5) stays; its rim, whose rays meet
     // only values below the band, goes too.

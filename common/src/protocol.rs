@@ -40,6 +40,11 @@ pub struct FrameState {
     /// first back end marches through the volume (`FrameStats::pick`).
     #[serde(default)]
     pub pick: Option<[[f64; 3]; 2]>,
+    /// With `pick`: grow a band picker's band from the picked point
+    /// instead, within this fraction of the transfer function's value span
+    /// (`FrameStats::grown`).
+    #[serde(default)]
+    pub grow: Option<f64>,
 }
 
 /// One streamed projector image: sRGB 8-bit RGB rows, top row first, the
@@ -95,7 +100,7 @@ pub enum ToBackend {
 
 /// The version of these messages: a rank that speaks another is named
 /// before the first frame.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// This build: the workspace's version and the commit it was built from.
 pub const BUILD: &str = concat!(env!("CARGO_PKG_VERSION"), " ", env!("PARALLAX_BUILD"));
@@ -178,6 +183,10 @@ pub struct FrameStats {
     /// ray's opacity reaches ½, if any (first back end only).
     #[serde(default)]
     pub pick: Option<[f64; 3]>,
+    /// The answer to `FrameState::grow`: the band grown from the picked
+    /// point, if the ray picked one (first back end only).
+    #[serde(default)]
+    pub grown: Option<[f64; 4]>,
     /// With `--present`: when this back end's windows were handed the frame
     /// (microseconds since the Unix epoch; the spread across ranks is the
     /// swap lock's), and how long converting and handing them took (ms).
@@ -430,6 +439,7 @@ mod tests {
             tools_version: 1,
             stream: Vec::new(),
             pick: None,
+            grow: None,
         };
         let msg = ToBackend::Frame(s.clone());
         let b = encode(&msg).unwrap();
@@ -518,6 +528,7 @@ mod tests {
             tools_version: 0,
             stream: Vec::new(),
             pick: None,
+            grow: None,
         };
         t.broadcast(&ToBackend::Frame(f)).unwrap();
         let stats = t.gather().unwrap();

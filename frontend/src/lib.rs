@@ -170,6 +170,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             tools_version: sent.tools_version,
             stream: Vec::new(),
             pick: None,
+            grow: None,
         };
         if let Some(sc) = &script {
             sent.script(sc, &scene, &display, &mut state, transport)?;

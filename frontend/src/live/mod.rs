@@ -100,6 +100,9 @@ struct Live {
     version: u64,
     /// A focus click's ray, for the next frame.
     pick: Option<[[f64; 3]; 2]>,
+    /// With `pick`: a band to grow for band picker `.0`, within `.1` of the
+    /// transfer function's value span (`grow-band`).
+    grow: Option<(usize, f64)>,
     quit: bool,
 }
 
@@ -121,6 +124,24 @@ impl Shared {
                     .focus_ray(display, x, y)
                     .map_err(|e| format!("refused: focus: {e}"))?;
                 live.pick = Some(ray);
+                live.grow = None;
+            }
+            ClientMsg::GrowBand {
+                index,
+                x,
+                y,
+                tolerance,
+            } => {
+                let tolerance = tolerance.unwrap_or(state::GROW_TOLERANCE);
+                live.state
+                    .check_grow(index, tolerance)
+                    .map_err(|e| format!("refused: {e}"))?;
+                let ray = live
+                    .state
+                    .focus_ray(display, x, y)
+                    .map_err(|e| format!("refused: grow-band: {e}"))?;
+                live.pick = Some(ray);
+                live.grow = Some((index, tolerance));
             }
             other => {
                 let mut next = live.state.clone();
@@ -187,6 +208,7 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
         state,
         version: 1,
         pick: None,
+        grow: None,
         quit: false,
     };
     let shared = Arc::new(Shared {
@@ -293,7 +315,7 @@ fn frame_loop(
     };
     let mut page_recordings = 0u32;
     for frame in 0u64.. {
-        let (state, version, pick) = {
+        let (state, version, pick, grow) = {
             let mut live = shared.live.lock().unwrap();
             while !live.quit
                 && live.version == rendered_version
@@ -305,7 +327,13 @@ fn frame_loop(
             if live.quit {
                 break;
             }
-            (live.state.clone(), live.version, live.pick.take())
+            let pick = live.pick.take();
+            let grow = if pick.is_some() {
+                live.grow.take()
+            } else {
+                None
+            };
+            (live.state.clone(), live.version, pick, grow)
         };
         if version != rendered_version {
             since_change = 0;
@@ -357,6 +385,7 @@ fn frame_loop(
             tools_version,
             stream: state.streamed(display),
             pick,
+            grow: grow.map(|(_, tolerance)| tolerance),
         };
         let start = Instant::now();
         transport.broadcast(&ToBackend::Frame(fs.clone()))?;
@@ -382,6 +411,7 @@ fn frame_loop(
             .flat_map(|s| std::mem::take(&mut s.images))
             .collect();
         let picked = stats.iter().find_map(|s| s.pick);
+        let grown = stats.iter().find_map(|s| s.grown);
         if let Some(f) = stats_file.as_mut() {
             crate::write_stats(f, &stats)?;
         }
@@ -404,8 +434,10 @@ fn frame_loop(
         shared
             .frame_tx
             .send_replace(Some(Arc::new((header.to_string(), png))));
-        if pick.is_some() {
-            focus(shared, picked);
+        match (pick.is_some(), grow) {
+            (true, Some((index, _))) => grow_band(shared, index, grown),
+            (true, None) => focus(shared, picked),
+            _ => {}
         }
     }
     if let Some(r) = recorder.take() {
@@ -432,6 +464,31 @@ fn focus(shared: &Shared, picked: Option<[f64; 3]>) {
     let mut live = shared.live.lock().unwrap();
     let z = &mut live.state.placement.center[2];
     *z = (*z - p[2]).clamp(-state::CENTER_LIMIT, state::CENTER_LIMIT);
+    live.version += 1;
+    shared
+        .state_tx
+        .send_replace(Arc::new(Shared::state_message(&live)));
+    drop(live);
+    shared.wake.notify_all();
+}
+
+/// Sets band picker `index`'s band to the one grown from the clicked
+/// point (G10 §4, region growing).
+fn grow_band(shared: &Shared, index: usize, grown: Option<[f64; 4]>) {
+    let notice = |message: String| {
+        let msg = serde_json::json!({"type": "error", "message": message});
+        let _ = shared.notice_tx.send(msg.to_string());
+    };
+    let Some(band) = grown else {
+        notice("grow-band: nothing visible at that point".into());
+        return;
+    };
+    let mut live = shared.live.lock().unwrap();
+    if let Err(e) = live.state.set_band(index, band) {
+        drop(live);
+        notice(format!("grow-band: {e:#}"));
+        return;
+    }
     live.version += 1;
     shared
         .state_tx

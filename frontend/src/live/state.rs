@@ -104,6 +104,15 @@ pub enum ClientMsg {
         x: f64,
         y: f64,
     },
+    /// Grows band picker `index`'s band from the point the click at (x, y)
+    /// picks (region growing, G10 §4), within `tolerance` × the transfer
+    /// function's value span of its value.
+    GrowBand {
+        index: usize,
+        x: f64,
+        y: f64,
+        tolerance: Option<f64>,
+    },
     Record {
         on: bool,
     },
@@ -127,6 +136,10 @@ pub struct ToolEdit {
 /// pan and focus stop there, and a state is refused beyond it, so every
 /// state the server sends can be applied again from its link.
 pub const CENTER_LIMIT: f64 = 10.0;
+
+/// The default `grow-band` tolerance: a twentieth of the transfer
+/// function's value span.
+pub const GROW_TOLERANCE: f64 = 0.05;
 
 /// Transfer-function points a page may send, in a `tf` or a `state`.
 const MAX_TF_POINTS: usize = 256;
@@ -355,7 +368,7 @@ impl LiveState {
             }
             ClientMsg::Record { on } => self.recording = on,
             ClientMsg::State { state } => self.set_state(*state, display)?,
-            ClientMsg::Focus { .. } | ClientMsg::Quit => {
+            ClientMsg::Focus { .. } | ClientMsg::GrowBand { .. } | ClientMsg::Quit => {
                 bail!("not a state change")
             }
         }
@@ -407,6 +420,40 @@ impl LiveState {
         edited.check(&format!("tool {index}"))?;
         *tool = edited;
         Ok(())
+    }
+
+    /// Whether `grow-band` may grow tool `index`'s band.
+    pub fn check_grow(&self, index: usize, tolerance: f64) -> Result<()> {
+        within("grow-band.tolerance", tolerance, 0.0, 1.0)?;
+        match self.tools.get(index) {
+            Some(Tool::BandPicker(_)) => Ok(()),
+            Some(t) => bail!(
+                "grow-band.index: tool {index} is a {}, not a band picker",
+                t.enhancer().file()
+            ),
+            None => bail!(
+                "grow-band.index: {index}, the scene has {} tool(s)",
+                self.tools.len()
+            ),
+        }
+    }
+
+    /// Sets band picker `index`'s band (by value).
+    pub fn set_band(&mut self, index: usize, band: [f64; 4]) -> Result<()> {
+        match self.tools.get_mut(index) {
+            Some(Tool::BandPicker(b)) => {
+                let next = Tool::BandPicker(parallax_common::tools::BandPicker {
+                    band,
+                    points: None,
+                    ..*b
+                });
+                tool_bounds(&next, "grow-band")?;
+                next.check("grow-band")?;
+                self.tools[index] = next;
+                Ok(())
+            }
+            _ => bail!("tool {index} is no longer a band picker"),
+        }
     }
 
     /// A whole state at once (a reload, a second page): every field through
