@@ -1066,12 +1066,44 @@ fn a_real_browser_drags_the_volume_round() {
                 assert!(start.elapsed() < WAIT, "the page never showed the probe's fields");
                 tokio::time::sleep(Duration::from_millis(100)).await;
             }
-            cdp.eval(&format!("(() => {{ document.querySelectorAll('#tools .removetool')[{n0}].click(); return ''; }})()")).await;
+            // Its ↑ button moves it to the chain's front; then it is removed
+            // from there.
+            cdp.eval(&format!("(() => {{ document.querySelectorAll('#tools .tool')[{n0}].querySelector('.movetool').click(); return ''; }})()")).await;
+            let start = Instant::now();
+            while observer.state["tools"][n0 - 1]["kind"] != "probe" {
+                assert!(start.elapsed() < WAIT, "the page's move never reached the server");
+                observer.next_text().await;
+            }
+            cdp.eval(&format!("(() => {{ document.querySelectorAll('#tools .removetool')[{}].click(); return ''; }})()", n0 - 1)).await;
             let start = Instant::now();
             while observer.state["tools"].as_array().unwrap().len() != n0 {
                 assert!(start.elapsed() < WAIT, "the page's remove never reached the server");
                 observer.next_text().await;
             }
+            // "place cursor" puts the 3D cursor at the screen's centre with
+            // the overlay on; a ctrl-drag to the right moves it right.
+            cdp.eval("(() => { document.getElementById('cursorbtn').click(); return ''; })()").await;
+            let start = Instant::now();
+            while observer.state["cursor"] != json!([0.0, 0.0, 0.0]) || observer.state["overlay"] != json!(true) {
+                assert!(start.elapsed() < WAIT, "the page's cursor never reached the server");
+                observer.next_text().await;
+            }
+            let ctrl = |kind: &str, x: f64, buttons: u32| {
+                json!({"type": kind, "x": x, "y": cy, "button": "left", "buttons": buttons, "clickCount": 1, "modifiers": 2})
+            };
+            cdp.call("Input.dispatchMouseEvent", ctrl("mousePressed", cx, 1)).await;
+            for k in 1..=6 {
+                cdp.call("Input.dispatchMouseEvent", ctrl("mouseMoved", cx + 10.0 * k as f64, 1))
+                    .await;
+                tokio::time::sleep(Duration::from_millis(30)).await;
+            }
+            cdp.call("Input.dispatchMouseEvent", ctrl("mouseReleased", cx + 60.0, 0)).await;
+            let start = Instant::now();
+            while observer.state["cursor"][0].as_f64().unwrap_or(0.0) <= 0.01 {
+                assert!(start.elapsed() < WAIT, "the ctrl-drag never moved the cursor");
+                observer.next_text().await;
+            }
+            assert_eq!(observer.state["cursor"][1], json!(0.0), "a horizontal drag");
             cdp.session = None;
             let _ = cdp.call("Browser.close", json!({})).await;
             observer.send(json!({"type": "quit"})).await;

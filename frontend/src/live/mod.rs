@@ -107,6 +107,25 @@ struct Live {
 }
 
 impl Shared {
+    /// An error message to every client.
+    fn notice(&self, message: &str) {
+        let msg = serde_json::json!({"type": "error", "message": message});
+        let _ = self.notice_tx.send(msg.to_string());
+    }
+
+    /// Changes the shared state from the frame loop (a focus, a grown
+    /// band): a new version, broadcast, and the loop woken.
+    fn change(&self, f: impl FnOnce(&mut LiveState) -> Result<()>) -> Result<()> {
+        let mut live = self.live.lock().unwrap();
+        f(&mut live.state)?;
+        live.version += 1;
+        self.state_tx
+            .send_replace(Arc::new(Self::state_message(&live)));
+        drop(live);
+        self.wake.notify_all();
+        Ok(())
+    }
+
     fn state_message(live: &Live) -> String {
         serde_json::json!({"type": "state", "version": live.version, "state": live.state})
             .to_string()
@@ -456,45 +475,27 @@ fn frame_loop(
 /// z = 0).
 fn focus(shared: &Shared, picked: Option<[f64; 3]>) {
     let Some(p) = picked else {
-        let msg =
-            serde_json::json!({"type": "error", "message": "focus: nothing visible at that point"});
-        let _ = shared.notice_tx.send(msg.to_string());
+        shared.notice("focus: nothing visible at that point");
         return;
     };
-    let mut live = shared.live.lock().unwrap();
-    let z = &mut live.state.placement.center[2];
-    *z = (*z - p[2]).clamp(-state::CENTER_LIMIT, state::CENTER_LIMIT);
-    live.version += 1;
-    shared
-        .state_tx
-        .send_replace(Arc::new(Shared::state_message(&live)));
-    drop(live);
-    shared.wake.notify_all();
+    // The change cannot fail: the centre is clamped to the state's limits.
+    let _ = shared.change(|state| {
+        let z = &mut state.placement.center[2];
+        *z = (*z - p[2]).clamp(-state::CENTER_LIMIT, state::CENTER_LIMIT);
+        Ok(())
+    });
 }
 
 /// Sets band picker `index`'s band to the one grown from the clicked
 /// point (G10 §4, region growing).
 fn grow_band(shared: &Shared, index: usize, grown: Option<[f64; 4]>) {
-    let notice = |message: String| {
-        let msg = serde_json::json!({"type": "error", "message": message});
-        let _ = shared.notice_tx.send(msg.to_string());
-    };
     let Some(band) = grown else {
-        notice("grow-band: nothing visible at that point".into());
+        shared.notice("grow-band: nothing visible at that point");
         return;
     };
-    let mut live = shared.live.lock().unwrap();
-    if let Err(e) = live.state.set_band(index, band) {
-        drop(live);
-        notice(format!("grow-band: {e:#}"));
-        return;
+    if let Err(e) = shared.change(|state| state.set_band(index, band)) {
+        shared.notice(&format!("grow-band: {e:#}"));
     }
-    live.version += 1;
-    shared
-        .state_tx
-        .send_replace(Arc::new(Shared::state_message(&live)));
-    drop(live);
-    shared.wake.notify_all();
 }
 
 fn next_session_dir(root: &std::path::Path, n: u32) -> Result<PathBuf> {
