@@ -10,6 +10,13 @@
 //! kernel's constants, the culling of empty space and the packing of its
 //! parameters follow from that declaration.
 //!
+//! Adding a kind: its WGSL file (found by name: `backend/build.rs` lists
+//! the folder), its line in `tool_kinds!` (the `Tool` variant, the scene's
+//! `kind`, the wire form and `EnhancerKind` follow), its `ENHANCERS`
+//! entry, and the arms of [`Tool::pack`] and [`Tool::check`] for its
+//! parameters. The live page, scripts and the naga test take it from
+//! there.
+//!
 //! ```toml
 //! [[tool]]
 //! kind = "clip-plane"
@@ -29,12 +36,73 @@ use std::path::Path;
 /// chained enhancing behaviors").
 pub const MAX_ENHANCERS: usize = 3;
 
-/// One tool, as written in a scene file (a table with its `kind`) and as
-/// broadcast to the back ends (bincode, which cannot read self-describing
-/// tags: the wire form names the variant by its index).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Tool {
+/// The kinds of tool, each once: its variant (with the struct of its
+/// parameters, if it has any), in the order of [`ENHANCERS`].
+/// `tool_kinds!` makes [`Tool`], its scene-file form `ToolTable`, the
+/// conversions between them, [`EnhancerKind`] (with `ALL`) and
+/// [`Tool::enhancer`] from this one list.
+macro_rules! tool_kinds {
+    ($( $(#[doc = $doc:literal])* $kind:ident $(($params:ident))? ),* $(,)?) => {
+        /// One tool, as written in a scene file (a table with its `kind`)
+        /// and as broadcast to the back ends (bincode, which cannot read
+        /// self-describing tags: the wire form names the variant by its
+        /// index).
+        #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+        #[serde(rename_all = "kebab-case")]
+        pub enum Tool {
+            $( $(#[doc = $doc])* $kind $(($params))?, )*
+        }
+
+        /// The scene-file form of [`Tool`]: `kind = "…"` beside the
+        /// parameters.
+        #[derive(Serialize, Deserialize)]
+        #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+        enum ToolTable {
+            $( $kind $(($params))?, )*
+        }
+
+        impl From<ToolTable> for Tool {
+            fn from(t: ToolTable) -> Tool {
+                match t {
+                    $( tool_kinds!(@bind p ToolTable $kind $(($params))?) => tool_kinds!(@bind p Tool $kind $(($params))?), )*
+                }
+            }
+        }
+
+        impl From<Tool> for ToolTable {
+            fn from(t: Tool) -> ToolTable {
+                match t {
+                    $( tool_kinds!(@bind p Tool $kind $(($params))?) => tool_kinds!(@bind p ToolTable $kind $(($params))?), )*
+                }
+            }
+        }
+
+        /// The kinds of enhancer a kernel can be built with, in
+        /// [`ENHANCERS`] order.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+        pub enum EnhancerKind {
+            $( $kind, )*
+        }
+
+        impl EnhancerKind {
+            pub const ALL: [EnhancerKind; [$(EnhancerKind::$kind),*].len()] = [$(EnhancerKind::$kind),*];
+        }
+
+        impl Tool {
+            pub fn enhancer(&self) -> EnhancerKind {
+                match self {
+                    $( tool_kinds!(@any Tool $kind $(($params))?) => EnhancerKind::$kind, )*
+                }
+            }
+        }
+    };
+    (@bind $v:ident $enum:ident $kind:ident ($params:ident)) => { $enum::$kind($v) };
+    (@bind $v:ident $enum:ident $kind:ident) => { $enum::$kind };
+    (@any $enum:ident $kind:ident ($params:ident)) => { $enum::$kind(_) };
+    (@any $enum:ident $kind:ident) => { $enum::$kind };
+}
+
+tool_kinds! {
     /// The default enhancer: changes nothing (and compiles to nothing). A
     /// scene may name it to measure what the chain itself costs.
     PassThrough,
@@ -55,9 +123,9 @@ pub enum Tool {
     /// space, its direction's x/y/z as red/green/blue from [−1, 1]),
     /// opaque; transparent where the ray meets no extinction.
     GradientDirection,
-    /// Diagnostic: each pixel shows its ray's final direction (volume space,
-    /// x/y/z as red/green/blue from [−1, 1]), opaque — how refraction is
-    /// checked against Snell's law.
+    /// Diagnostic: each pixel shows its ray's final direction (volume
+    /// space, x/y/z as red/green/blue from [−1, 1]), opaque — how
+    /// refraction is checked against Snell's law.
     ExitDirection,
 }
 
@@ -302,50 +370,6 @@ impl Probe {
     }
 }
 
-/// The scene-file form of [`Tool`]: `kind = "…"` beside the parameters.
-#[derive(Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
-enum ToolTable {
-    PassThrough,
-    ClipPlane(ClipPlane),
-    Probe(Probe),
-    BandPicker(BandPicker),
-    UnsharpGradient(UnsharpGradient),
-    ExaggeratedShading(ExaggeratedShading),
-    GradientDirection,
-    ExitDirection,
-}
-
-impl From<ToolTable> for Tool {
-    fn from(t: ToolTable) -> Tool {
-        match t {
-            ToolTable::PassThrough => Tool::PassThrough,
-            ToolTable::ClipPlane(c) => Tool::ClipPlane(c),
-            ToolTable::Probe(p) => Tool::Probe(p),
-            ToolTable::BandPicker(b) => Tool::BandPicker(b),
-            ToolTable::UnsharpGradient(u) => Tool::UnsharpGradient(u),
-            ToolTable::ExaggeratedShading(e) => Tool::ExaggeratedShading(e),
-            ToolTable::GradientDirection => Tool::GradientDirection,
-            ToolTable::ExitDirection => Tool::ExitDirection,
-        }
-    }
-}
-
-impl From<Tool> for ToolTable {
-    fn from(t: Tool) -> ToolTable {
-        match t {
-            Tool::PassThrough => ToolTable::PassThrough,
-            Tool::ClipPlane(c) => ToolTable::ClipPlane(c),
-            Tool::Probe(p) => ToolTable::Probe(p),
-            Tool::BandPicker(b) => ToolTable::BandPicker(b),
-            Tool::UnsharpGradient(u) => ToolTable::UnsharpGradient(u),
-            Tool::ExaggeratedShading(e) => ToolTable::ExaggeratedShading(e),
-            Tool::GradientDirection => ToolTable::GradientDirection,
-            Tool::ExitDirection => ToolTable::ExitDirection,
-        }
-    }
-}
-
 /// `#[serde(with = "tools::list")]`: a tool list as `[[tool]]` tables in
 /// readable formats, in [`Tool`]'s own (indexed) form on the wire.
 pub mod list {
@@ -369,20 +393,6 @@ pub mod list {
             Vec::<Tool>::deserialize(d)
         }
     }
-}
-
-/// The kinds of enhancer a kernel can be built with, in [`ENHANCERS`]
-/// order.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-pub enum EnhancerKind {
-    PassThrough,
-    ClipPlane,
-    Probe,
-    BandPicker,
-    UnsharpGradient,
-    ExaggeratedShading,
-    GradientDirection,
-    ExitDirection,
 }
 
 /// What an enhancer needs from the kernel and what it does to a ray: the
@@ -532,17 +542,6 @@ pub const ENHANCERS: [EnhancerSpec; 8] = [
 ];
 
 impl EnhancerKind {
-    pub const ALL: [EnhancerKind; 8] = [
-        EnhancerKind::PassThrough,
-        EnhancerKind::ClipPlane,
-        EnhancerKind::Probe,
-        EnhancerKind::BandPicker,
-        EnhancerKind::UnsharpGradient,
-        EnhancerKind::ExaggeratedShading,
-        EnhancerKind::GradientDirection,
-        EnhancerKind::ExitDirection,
-    ];
-
     /// The kind's declaration.
     pub fn spec(self) -> &'static EnhancerSpec {
         &ENHANCERS[self as usize]
@@ -568,19 +567,6 @@ pub struct PackContext {
 }
 
 impl Tool {
-    pub fn enhancer(&self) -> EnhancerKind {
-        match self {
-            Tool::PassThrough => EnhancerKind::PassThrough,
-            Tool::ClipPlane(_) => EnhancerKind::ClipPlane,
-            Tool::Probe(_) => EnhancerKind::Probe,
-            Tool::BandPicker(_) => EnhancerKind::BandPicker,
-            Tool::UnsharpGradient(_) => EnhancerKind::UnsharpGradient,
-            Tool::ExaggeratedShading(_) => EnhancerKind::ExaggeratedShading,
-            Tool::GradientDirection => EnhancerKind::GradientDirection,
-            Tool::ExitDirection => EnhancerKind::ExitDirection,
-        }
-    }
-
     /// The tool's constant state as the kernel reads it (`ToolParams`:
     /// four vec4, meaning per enhancer, written in its WGSL file's header).
     pub fn pack(&self, ctx: &PackContext) -> [[f32; 4]; 4] {

@@ -56,45 +56,13 @@ pub const MODULES: &[(&str, &str)] = &[
     ),
 ];
 
-/// The enhancers' WGSL files, by the name their [`EnhancerSpec`] declares:
+/// The enhancers' WGSL files (every `shaders/enhancers/*.wgsl`, listed by
+/// `backend/build.rs`), by the name their [`EnhancerSpec`] declares:
 /// templates whose `ENH_` names and `ENH_INDEX` are replaced per instance.
 /// An enhancer that reads the gradient or the importance also defines
 /// `ENH_active(smp) -> bool`, where it acts: the kernel computes those
 /// inputs only there.
-const ENHANCER_FILES: &[(&str, &str)] = &[
-    (
-        "pass-through",
-        include_str!("../../../shaders/enhancers/pass-through.wgsl"),
-    ),
-    (
-        "clip-plane",
-        include_str!("../../../shaders/enhancers/clip-plane.wgsl"),
-    ),
-    (
-        "probe",
-        include_str!("../../../shaders/enhancers/probe.wgsl"),
-    ),
-    (
-        "band-picker",
-        include_str!("../../../shaders/enhancers/band-picker.wgsl"),
-    ),
-    (
-        "unsharp-gradient",
-        include_str!("../../../shaders/enhancers/unsharp-gradient.wgsl"),
-    ),
-    (
-        "exaggerated-shading",
-        include_str!("../../../shaders/enhancers/exaggerated-shading.wgsl"),
-    ),
-    (
-        "gradient-direction",
-        include_str!("../../../shaders/enhancers/gradient-direction.wgsl"),
-    ),
-    (
-        "exit-direction",
-        include_str!("../../../shaders/enhancers/exit-direction.wgsl"),
-    ),
-];
+const ENHANCER_FILES: &[(&str, &str)] = include!(concat!(env!("OUT_DIR"), "/enhancers.rs"));
 
 fn enhancer_source(kind: EnhancerKind) -> &'static str {
     let name = kind.spec().name;
