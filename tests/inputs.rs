@@ -259,3 +259,46 @@ fn a_dicom_series_renders_the_same_image_as_the_nrrd() {
     }
     assert_eq!(images[0], images[1], "bit for bit");
 }
+
+/// Hostile headers (issue 38), written by `make_inputs.py` into `crafted/`:
+/// each is refused by `parallax import` within a second, naming the file
+/// and the field, and nothing is written.
+#[test]
+fn crafted_headers_are_refused_at_once_naming_the_field() {
+    let dir = inputs().join("crafted");
+    let out = tempfile::tempdir().unwrap();
+    for (name, field) in [
+        (
+            "huge.nii",
+            "huge.nii: dim, datatype, vox_offset: expected at least",
+        ),
+        ("huge.nii.gz", "huge.nii.gz: --memory-mb"),
+        ("negative.nii", "negative.nii: dim: dim[1] is -5"),
+        ("offset.nii", "offset.nii: dim, datatype, vox_offset"),
+        (
+            "huge.tif",
+            "huge.tif: ImageWidth/ImageLength: axis 0 has 4294967295 voxels",
+        ),
+        ("loop.tif", "loop.tif: not a TIFF file"),
+        ("dicom-huge", "NumberOfFrames (0028,0008) is 2147483647"),
+    ] {
+        let pxo = out.path().join(format!("{name}.pxo"));
+        let t = std::time::Instant::now();
+        let o = Command::new("timeout")
+            .arg("10")
+            .arg(env!("CARGO_BIN_EXE_parallax"))
+            .arg("import")
+            .arg(dir.join(name))
+            .arg("-o")
+            .arg(&pxo)
+            .output()
+            .unwrap();
+        let secs = t.elapsed().as_secs_f64();
+        let err = String::from_utf8_lossy(&o.stderr);
+        println!("{name}: {secs:.3} s: {}", err.trim());
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert!(err.contains(field), "{name}: {err}");
+        assert!(secs < 1.0, "{name}: took {secs:.2} s");
+        assert!(!pxo.exists(), "{name}: wrote {}", pxo.display());
+    }
+}

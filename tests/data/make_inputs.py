@@ -18,9 +18,16 @@ OUT_DIR/
   tiff/                   one 2-D int16 TIFF per slice, natural-order names
   stack.tif               one multi-page uint16 TIFF with ImageJ metadata
   stack-f32.tif           one multi-page float32 TIFF
+  crafted/                hostile headers (issue 38): NIfTI sizes of 32767³
+                          f64 in 416 bytes (plain and gzip), a negative
+                          dim, a vox_offset of 3e38; a TIFF 2^32 − 1 wide
+                          and one whose IFD list loops; a DICOM claiming
+                          65535² × 2^31 frames
 """
 import os
+import gzip
 import random
+import struct
 import shutil
 import sys
 
@@ -106,6 +113,65 @@ def write_series(folder, vol, series_uid, description, z_positions,
         ds.save_as(os.path.join(folder, name), write_like_original=False)
 
 
+def nifti(dims, datatype=64, bitpix=64, vox_offset=352.0):
+    """A NIfTI-1 header of `dims` (signed 16-bit, as the format has them)
+    and 68 bytes of data: far fewer than the header claims."""
+    h = bytearray(348)
+    struct.pack_into("<i", h, 0, 348)
+    struct.pack_into("<8h", h, 40, len(dims), *dims, *([1] * (7 - len(dims))))
+    struct.pack_into("<hh", h, 70, datatype, bitpix)
+    struct.pack_into("<8f", h, 76, *([1.0] * 8))
+    struct.pack_into("<ff", h, 108, vox_offset, 1.0)
+    h[344:348] = b"n+1\0"
+    return bytes(h) + bytes(4 + 64)
+
+
+def tiff(width, length, loop=False):
+    """A little-endian TIFF of one 8-bit strip whose IFD says `width` ×
+    `length` (LONG), and whose next-IFD offset points back at itself if
+    `loop`."""
+    entries = [(256, 4, width), (257, 4, length), (258, 3, 8), (259, 3, 1),
+               (262, 3, 1), (273, 4, 200), (277, 3, 1), (279, 4, 16)]
+    b = bytearray(b"II*\0" + struct.pack("<IH", 8, len(entries)))
+    for tag, typ, val in entries:
+        b += struct.pack("<HHII", tag, typ, 1, val)
+    b += struct.pack("<I", 8 if loop else 0)
+    return bytes(b) + bytes(216 - len(b))
+
+
+def write_crafted(out):
+    os.makedirs(out)
+    huge = nifti([32767, 32767, 32767])
+    for name, data in [("huge.nii", huge), ("huge.nii.gz", gzip.compress(huge)),
+                       ("negative.nii", nifti([-5, 4, 4], 2, 8)),
+                       ("offset.nii", nifti([4, 4, 4], 2, 8, 3.0e38)),
+                       ("huge.tif", tiff(0xFFFFFFFF, 1)),
+                       ("loop.tif", tiff(4, 4, loop=True))]:
+        with open(os.path.join(out, name), "wb") as f:
+            f.write(data)
+    d = os.path.join(out, "dicom-huge")
+    os.makedirs(d)
+    meta = FileMetaDataset()
+    meta.MediaStorageSOPClassUID = CTImageStorage
+    meta.MediaStorageSOPInstanceUID = generate_uid()
+    meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds = FileDataset(os.path.join(d, "a.dcm"), {}, file_meta=meta, preamble=bytes(128))
+    ds.SOPClassUID = CTImageStorage
+    ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
+    ds.Modality = "CT"
+    ds.SeriesInstanceUID = "1.2.826.0.1.3680043.8.498.12"
+    ds.StudyInstanceUID = "1.2.826.0.1.3680043.8.498.13"
+    ds.Rows, ds.Columns, ds.NumberOfFrames = 65535, 65535, "2147483647"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit = 16, 16, 15
+    ds.PixelRepresentation, ds.SamplesPerPixel = 0, 1
+    ds.PhotometricInterpretation = "MONOCHROME2"
+    ds.PixelSpacing, ds.SliceThickness = [1, 1], 1
+    ds.ImagePositionPatient, ds.ImageOrientationPatient = [0, 0, 0], [1, 0, 0, 0, 1, 0]
+    ds.PixelData = bytes(16)
+    ds.is_little_endian, ds.is_implicit_VR = True, False
+    ds.save_as(os.path.join(d, "a.dcm"), write_like_original=False)
+
+
 def main():
     out = sys.argv[1]
     shutil.rmtree(out, ignore_errors=True)
@@ -137,6 +203,7 @@ def main():
                      resolution=(1 / SPACING[0], 1 / SPACING[1]),
                      metadata={"spacing": SPACING[2], "unit": "mm"})
     tifffile.imwrite(os.path.join(out, "stack-f32.tif"), vol.astype(np.float32) / 7.0)
+    write_crafted(os.path.join(out, "crafted"))
 
 
 if __name__ == "__main__":

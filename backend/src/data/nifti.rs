@@ -125,6 +125,16 @@ pub fn open_nifti(path: &Path) -> Result<RawSource> {
         String::from_utf8_lossy(&h.magic[..3])
     );
 
+    // The header's dims are signed 16-bit: the reader's u16 turns a crafted
+    // −5 into 65531, so they are read back as what the file says.
+    let signed = h.dim.map(|d| d as i16);
+    let used = signed[0].clamp(0, 7) as usize;
+    if let Some(a) = (1..=used).find(|&a| signed[a] <= 0) {
+        bail!(
+            "{label}: dim: dim[{a}] is {} (sizes must be positive)",
+            signed[a]
+        );
+    }
     let ndim = h.dim[0] as usize;
     ensure!(
         (3..=7).contains(&ndim) && h.dim[4..=ndim].iter().all(|&d| d == 1),
@@ -165,7 +175,13 @@ pub fn open_nifti(path: &Path) -> Result<RawSource> {
     // and its 4-byte extension flag.
     let vox_offset = (vox_offset as u64).max(MIN_VOX_OFFSET);
     if !gz {
-        check_file_size(&label, &info, vox_offset, file_len, false)?;
+        check_file_size(
+            &format!("{label}: dim, datatype, vox_offset"),
+            &info,
+            vox_offset,
+            file_len,
+            false,
+        )?;
     }
     skip_bytes(&mut reader, vox_offset - HEADER_BYTES as u64).with_context(|| {
         format!("{label}: vox_offset: cannot reach the data at byte {vox_offset}")

@@ -242,7 +242,8 @@ pub(crate) fn check_file_size(
     file_len: u64,
     exact: bool,
 ) -> Result<()> {
-    let expected = offset + info.source_bytes();
+    // Saturating: a crafted offset (a NIfTI's vox_offset of 3e38) must not wrap.
+    let expected = offset.saturating_add(info.source_bytes());
     if file_len == expected || (!exact && file_len > expected) {
         return Ok(());
     }

@@ -103,7 +103,7 @@ pub fn import(
     let need = memory_needed(&layout);
     if need > opts.memory_mb as u64 * (1 << 20) {
         bail!(
-            "--memory-mb {}: importing {}×{}×{} with {}³ bricks needs at least {} MiB \
+            "{source_name}: --memory-mb {}: importing {}×{}×{} with {}³ bricks needs at least {} MiB \
              (slice windows of every level); raise --memory-mb",
             opts.memory_mb,
             info.dims[0],
