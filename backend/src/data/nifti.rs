@@ -129,7 +129,7 @@ pub fn open_nifti(path: &Path) -> Result<RawSource> {
     // −5 into 65531, so they are read back as what the file says.
     let signed = h.dim.map(|d| d as i16);
     let used = signed[0].clamp(0, 7) as usize;
-    if let Some(a) = (1..=used).find(|&a| signed[a] <= 0) {
+    if let Some(a) = (1..=used).find(|&a| signed[a] < 0) {
         bail!(
             "{label}: dim: dim[{a}] is {} (sizes must be positive)",
             signed[a]
