@@ -253,6 +253,15 @@ fn serve_in_process(
     scene: PathBuf,
     backends: usize,
 ) -> (String, std::thread::JoinHandle<anyhow::Result<()>>) {
+    serve_with_limits(scene, backends, Default::default())
+}
+
+/// As [`serve_in_process`], with where a recording stops itself.
+fn serve_with_limits(
+    scene: PathBuf,
+    backends: usize,
+    record_limits: parallax_frontend::live::record::Limits,
+) -> (String, std::thread::JoinHandle<anyhow::Result<()>>) {
     let (tx, rx) = std::sync::mpsc::channel();
     let opts = parallax_frontend::live::ServeOptions {
         scene: scene.clone(),
@@ -263,6 +272,7 @@ fn serve_in_process(
         sync_io: false,
         record: None,
         record_dir: scene.parent().unwrap().join("recordings"),
+        record_limits,
         watchdog: Some(Duration::from_secs(120)),
         ready: Some(tx),
         eye_view: parallax::launch::eye_view,
@@ -1250,4 +1260,178 @@ fn tokens_are_long_and_may_come_from_the_environment() {
     let (_child, url, _) =
         spawn_serve(&["--scene", s(&scene)], &[("PARALLAX_TOKEN", token)], false);
     assert!(url.ends_with(&format!("?token={token}")), "{url}");
+}
+
+/// Rotates a step for every frame received until `until`: the arrival
+/// times of the frames and whether each was recorded, and the `recorded`
+/// message if one came.
+async fn spin(
+    c: &mut Client,
+    until: std::time::Instant,
+) -> (Vec<(std::time::Instant, bool)>, Option<Value>) {
+    let (mut out, mut recorded) = (Vec::new(), None);
+    while std::time::Instant::now() < until {
+        c.send(json!({"type": "rotate", "dx": 1.0, "dy": 0.0}))
+            .await;
+        loop {
+            let m = c.next_text().await;
+            assert_ne!(m["type"], "error", "{m}");
+            if m["type"] == "recorded" {
+                recorded = Some(m);
+            } else if m["type"] == "frame" {
+                c.ws.next().await;
+                out.push((std::time::Instant::now(), !m["recording"].is_null()));
+                break;
+            }
+        }
+    }
+    (out, recorded)
+}
+
+/// Recording (issue 38): the images are written by a thread of their own
+/// and the script and movie by another at the lowest priority, so stopping
+/// a 30-second recording does not hold up the next frame beyond its usual
+/// time; at its bound a recording stops itself and the session goes on.
+#[test]
+fn a_recording_neither_holds_up_the_frames_nor_outgrows_its_bound() {
+    use std::time::Instant;
+    std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    let w = World::new([96, 72]);
+    let (url, server) = serve_in_process(w.path("desktop-scene.toml"), 1);
+    let quantile = |v: &mut Vec<f64>, q: f64| {
+        v.sort_by(f64::total_cmp);
+        v[((v.len() - 1) as f64 * q) as usize]
+    };
+    runtime().block_on(async {
+        let mut a = Client::connect(&url).await;
+        a.settled(1).await;
+        let v = a.change(json!({"type": "record", "on": true})).await;
+        a.settled(v).await;
+        let (during, _) = spin(&mut a, Instant::now() + Duration::from_secs(30)).await;
+        a.send(json!({"type": "record", "on": false})).await;
+        let (after, rec) = spin(&mut a, Instant::now() + Duration::from_secs(3)).await;
+        let mut gaps: Vec<f64> = during
+            .windows(2)
+            .map(|p| (p[1].0 - p[0].0).as_secs_f64())
+            .collect();
+        let recorded = during.iter().filter(|f| f.1).count();
+        let first_after = after
+            .iter()
+            .position(|f| !f.1)
+            .expect("the recording stopped");
+        let before_it = if first_after == 0 {
+            during.last().unwrap().0
+        } else {
+            after[first_after - 1].0
+        };
+        let delay = (after[first_after].0 - before_it).as_secs_f64();
+        let (median, p90) = (quantile(&mut gaps, 0.5), quantile(&mut gaps, 0.9));
+        let worst_after = after
+            .windows(2)
+            .map(|p| (p[1].0 - p[0].0).as_secs_f64())
+            .fold(0.0, f64::max);
+        println!(
+            "{recorded} frames recorded in 30 s: frame times median {:.1} ms, p90 {:.1} ms; \
+             the frame after the stop came {:.1} ms after the one before; \
+             the slowest frame while the movie was written: {:.1} ms",
+            median * 1e3,
+            p90 * 1e3,
+            delay * 1e3,
+            worst_after * 1e3
+        );
+        assert!(recorded > 100, "{recorded} frames");
+        assert!(
+            delay <= 2.0 * p90,
+            "the stop held up the next frame: {delay:.3} s against a usual {p90:.3} s"
+        );
+        let rec = match rec {
+            Some(r) => r,
+            None => a.wait_for("recorded").await,
+        };
+        println!("{rec}");
+        let frames = rec["frames"].as_u64().unwrap() as usize;
+        assert!(frames >= recorded, "{rec}");
+        let movie = PathBuf::from(rec["movie"].as_str().unwrap());
+        assert!(std::fs::metadata(&movie).unwrap().len() > 1000);
+        a.send(json!({"type": "quit"})).await;
+    });
+    server.join().unwrap().unwrap();
+
+    // A bound of 12 frames: the recording stops itself, says why, writes
+    // its 12 frames, and the session goes on.
+    let limits = parallax_frontend::live::record::Limits {
+        frames: 12,
+        bytes: 1 << 30,
+    };
+    let (url, server) = serve_with_limits(w.path("desktop-scene.toml"), 1, limits);
+    runtime().block_on(async {
+        let mut a = Client::connect(&url).await;
+        a.settled(1).await;
+        let v = a.change(json!({"type": "record", "on": true})).await;
+        assert_eq!(a.state["recording"], json!(true));
+        a.settled(v).await;
+        let (mut stopped, mut rec) = (None, None);
+        while stopped.is_none() || rec.is_none() || a.state["recording"] != json!(false) {
+            a.send(json!({"type": "rotate", "dx": 1.0, "dy": 0.0}))
+                .await;
+            let m = a.next_text().await;
+            match m["type"].as_str() {
+                Some("error") => stopped = Some(m["message"].as_str().unwrap().to_string()),
+                Some("recorded") => rec = Some(m),
+                Some("frame") => {
+                    a.ws.next().await;
+                }
+                _ => {}
+            }
+        }
+        let (stopped, rec) = (stopped.unwrap(), rec.unwrap());
+        assert!(
+            stopped.contains("reached its bound (12 frames"),
+            "{stopped}"
+        );
+        assert_eq!(rec["frames"], json!(12), "{rec}");
+        let v = a
+            .change(json!({"type": "rotate", "dx": 5.0, "dy": 0.0}))
+            .await;
+        let f = a.settled(v).await;
+        assert!(f.header["recording"].is_null());
+
+        // A disk that fails under a recording (its folder taken away):
+        // the recording stops, saying why, and the session goes on.
+        let v = a.change(json!({"type": "record", "on": true})).await;
+        a.settled(v).await;
+        let sessions = w.path("recordings");
+        for e in std::fs::read_dir(&sessions).unwrap() {
+            let frames = e.unwrap().path().join("frames");
+            if frames.exists() && std::fs::read_dir(&frames).unwrap().count() < 12 {
+                std::fs::remove_dir_all(&frames).unwrap();
+            }
+        }
+        let failed = loop {
+            a.send(json!({"type": "rotate", "dx": 1.0, "dy": 0.0}))
+                .await;
+            let m = a.next_text().await;
+            match m["type"].as_str() {
+                Some("error") => break m["message"].as_str().unwrap().to_string(),
+                Some("frame") => {
+                    a.ws.next().await;
+                }
+                _ => {}
+            }
+        };
+        assert!(
+            failed.contains("cannot write") && failed.contains("the recording is stopped"),
+            "{failed}"
+        );
+        while a.state["recording"] != json!(false) {
+            a.next_text().await;
+        }
+        let v = a
+            .change(json!({"type": "rotate", "dx": 5.0, "dy": 0.0}))
+            .await;
+        let f = a.settled(v).await;
+        assert!(f.header["recording"].is_null());
+        a.send(json!({"type": "quit"})).await;
+    });
+    server.join().unwrap().unwrap();
 }

@@ -35,6 +35,12 @@ pub struct Args {
     /// Where the page's record control writes its sessions.
     #[arg(long, default_value = "out/live")]
     record_dir: PathBuf,
+    /// A recording stops itself after this many frames.
+    #[arg(long, default_value_t = parallax_frontend::live::record::Limits::default().frames)]
+    record_max_frames: usize,
+    /// … or after this many MiB of images.
+    #[arg(long, default_value_t = parallax_frontend::live::record::Limits::default().bytes >> 20)]
+    record_max_mb: u64,
     /// Show every frame on the display's outputs too, all back ends
     /// together (as `render --present`).
     #[arg(long)]
@@ -58,6 +64,10 @@ pub fn run(a: Args) -> Result<()> {
         sync_io: a.sync,
         record: a.record,
         record_dir: a.record_dir,
+        record_limits: parallax_frontend::live::record::Limits {
+            frames: a.record_max_frames.max(1),
+            bytes: a.record_max_mb.max(1) << 20,
+        },
         watchdog: args::watchdog(a.watchdog)?,
         ready: None,
         eye_view: launch::eye_view,

@@ -12,7 +12,7 @@
 //! Frames reach the clients through a `watch` channel, which holds only the
 //! newest: a slow or vanished client misses frames, never stalls the loop.
 
-mod record;
+pub mod record;
 mod state;
 
 pub use state::{ClientMsg, LiveState};
@@ -58,6 +58,8 @@ pub struct ServeOptions {
     pub record: Option<PathBuf>,
     /// Where the page's record control writes.
     pub record_dir: PathBuf,
+    /// Where a recording stops itself.
+    pub record_limits: record::Limits,
     pub watchdog: Option<Duration>,
     /// Told the page's URL once the server listens.
     pub ready: Option<std::sync::mpsc::Sender<String>>,
@@ -211,7 +213,9 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
         version: 1,
         tools: scene.tools.clone(),
     })?;
-    let hello = state::hello(&opts.scene, &scene, &display, &tf, &opts.record_dir).to_string();
+    let mut hello = state::hello(&opts.scene, &scene, &display, &tf, &opts.record_dir);
+    hello["record_limits"] = opts.record_limits.json();
+    let hello = hello.to_string();
     let state = LiveState::from_scene(&scene, &display, tf);
     let token = match &opts.token {
         Some(t) if t.len() < MIN_TOKEN || !t.chars().all(|c| c.is_ascii_alphanumeric()) => {
@@ -329,10 +333,17 @@ fn frame_loop(
     let mut sent_tools = scene.tools.clone();
     let mut tools_version = 1u64;
     let mut recorder = match &opts.record {
-        Some(dir) => Some(record::Recorder::start(dir.clone(), 0, false)?),
+        Some(dir) => Some(record::Recorder::start(
+            dir.clone(),
+            0,
+            false,
+            opts.record_limits,
+        )?),
         None => None,
     };
     let mut page_recordings = 0u32;
+    // Recordings whose script and movie are being written.
+    let mut finishing = Vec::new();
     for frame in 0u64.. {
         let (state, version, pick, grow) = {
             let mut live = shared.live.lock().unwrap();
@@ -361,12 +372,15 @@ fn frame_loop(
         match (&recorder, state.recording) {
             (None, true) => {
                 page_recordings += 1;
-                let dir = next_session_dir(&opts.record_dir, page_recordings)?;
-                recorder = Some(record::Recorder::start(dir, frame, true)?);
+                match next_session_dir(&opts.record_dir, page_recordings)
+                    .and_then(|dir| record::Recorder::start(dir, frame, true, opts.record_limits))
+                {
+                    Ok(r) => recorder = Some(r),
+                    Err(e) => stop_recording(shared, &format!("record: {e:#}"))?,
+                }
             }
             (Some(r), false) if r.started_by_page() => {
-                let done = recorder.take().unwrap().finish()?;
-                let _ = shared.notice_tx.send(done.message());
+                finishing.push(finish(recorder.take().unwrap(), shared)?);
             }
             _ => {}
         }
@@ -436,8 +450,28 @@ fn frame_loop(
         }
         let (w, h, rgb) = state.image(display, &images, opts.eye_view)?;
         let png = encode_png(w, h, &rgb)?;
-        if let Some(r) = recorder.as_mut() {
-            r.frame(&fs, &state, &png)?;
+        let step = recorder.as_mut().map(|r| r.frame(&fs, &state, &png));
+        let recording = recorder.as_ref().map(|r| {
+            let (frames, bytes) = r.progress();
+            serde_json::json!({"frames": frames, "bytes": bytes})
+        });
+        match step {
+            Some(Ok(record::Step::Full)) => {
+                finishing.push(finish(recorder.take().unwrap(), shared)?);
+                stop_recording(
+                    shared,
+                    &format!(
+                        "record: the recording reached its bound ({} frames or {} MiB) and was stopped",
+                        opts.record_limits.frames,
+                        opts.record_limits.bytes >> 20
+                    ),
+                )?;
+            }
+            Some(Err(e)) => {
+                recorder = None;
+                stop_recording(shared, &format!("record: {e:#}; the recording is stopped"))?;
+            }
+            _ => {}
         }
         let header = serde_json::json!({
             "type": "frame",
@@ -448,6 +482,7 @@ fn frame_loop(
             "wall_ms": wall_ms,
             "converged": converged,
             "coordinator_rss_bytes": parallax_common::resident_bytes(),
+            "recording": recording,
             "stats": stats,
         });
         shared
@@ -460,14 +495,49 @@ fn frame_loop(
         }
     }
     if let Some(r) = recorder.take() {
-        let done = r.finish()?;
-        println!("{}", done.summary());
+        finishing.push(r.finish(|done| match done {
+            Ok(d) => println!("{}", d.summary()),
+            Err(e) => eprintln!("warning: record: {e:#}"),
+        })?);
+    }
+    for f in finishing {
+        let _ = f.join();
     }
     if let Some(f) = stats_file {
         f.into_inner()
             .map_err(|e| anyhow::anyhow!("writing stats: {}", e.error()))?;
     }
     Ok(())
+}
+
+/// Finishes a recording off the frame loop; every page hears how it went.
+fn finish(r: record::Recorder, shared: &Shared) -> Result<std::thread::JoinHandle<()>> {
+    let tx = shared.notice_tx.clone();
+    let page = r.started_by_page();
+    r.finish(move |done| {
+        let msg = match done {
+            Ok(d) if page => d.message(),
+            Ok(d) => {
+                println!("{}", d.summary());
+                return;
+            }
+            Err(e) => serde_json::json!({"type": "error", "message": format!("record: {e:#}")})
+                .to_string(),
+        };
+        let _ = tx.send(msg);
+    })
+}
+
+/// Ends a recording the loop could not go on with (a bound reached, a
+/// disk that failed): the pages hear why, and the shared state says the
+/// session is not recording, so the control does not start another.
+fn stop_recording(shared: &Shared, why: &str) -> Result<()> {
+    eprintln!("warning: {why}");
+    shared.notice(why);
+    shared.change(|s| {
+        s.recording = false;
+        Ok(())
+    })
 }
 
 /// Moves the volume along z so the picked point lies on the screen plane,

@@ -4,6 +4,14 @@
 //! both sides, replays bit for bit: the cut is refined from the same
 //! states in the same order), and the streamed images become a movie (MP4
 //! through ffmpeg when it is installed, else an animated GIF).
+//!
+//! A recording never holds up the frame loop: the images are written by a
+//! thread of their own (a queue of [`QUEUE`] frames; a frame the disk cannot
+//! take in time is left out of the movie, and counted), the script and the
+//! movie are written by another after the stop, at the lowest CPU priority.
+//! It is bounded ([`Limits`], said on the page): at a
+//! bound it stops itself as if the page had stopped it. A failure (a full
+//! disk) stops the recording, not the session.
 
 use super::LiveState;
 use crate::script::{Key, PlacementKey, ScriptFile, ToolSet};
@@ -12,6 +20,36 @@ use parallax_common::protocol::FrameState;
 use parallax_common::tf::TransferFunction;
 use parallax_common::tools::Tool;
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{sync_channel, SyncSender, TrySendError};
+use std::thread::JoinHandle;
+
+/// Where a recording stops itself (`serve --record-max-frames`,
+/// `--record-max-mb`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Frames (the default: ten minutes at 30 frames a second).
+    pub frames: usize,
+    /// Bytes of images (the movie's frames; the default: 4 GiB).
+    pub bytes: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            frames: 18_000,
+            bytes: 4 << 30,
+        }
+    }
+}
+
+impl Limits {
+    /// As the page shows them (`record_limits` in `hello`).
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::json!({"frames": self.frames, "bytes": self.bytes})
+    }
+}
+/// Images waiting for the writer at most.
+const QUEUE: usize = 32;
 
 /// One recorded frame: what the script must reproduce.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,7 +66,22 @@ pub struct Recorder {
     /// control stops it).
     page: bool,
     frames: Vec<Recorded>,
-    movie_frames: u32,
+    limits: Limits,
+    /// Bytes of images handed to the writer.
+    bytes: u64,
+    /// Images left out of the movie because the writer was behind.
+    dropped: usize,
+    images: Option<SyncSender<Vec<u8>>>,
+    /// Writes `frames/00000.png`, …; returns how many it wrote.
+    writer: Option<JoinHandle<Result<usize>>>,
+}
+
+/// Whether a recording goes on after a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Step {
+    Recording,
+    /// A bound is reached: the recording must be finished.
+    Full,
 }
 
 /// What a finished recording wrote.
@@ -36,6 +89,9 @@ pub struct Done {
     pub script: PathBuf,
     pub movie: Option<PathBuf>,
     pub frames: usize,
+    /// Frames whose image the disk could not take in time (in the script,
+    /// not in the movie).
+    pub dropped: usize,
 }
 
 impl Done {
@@ -45,33 +101,62 @@ impl Done {
             "script": self.script.display().to_string(),
             "movie": self.movie.as_ref().map(|m| m.display().to_string()),
             "frames": self.frames,
+            "dropped": self.dropped,
         })
         .to_string()
     }
 
     pub fn summary(&self) -> String {
         format!(
-            "recorded {} frames: {}{}",
+            "recorded {} frames: {}{}{}",
             self.frames,
             self.script.display(),
             self.movie
                 .as_ref()
                 .map(|m| format!(", {}", m.display()))
-                .unwrap_or_default()
+                .unwrap_or_default(),
+            if self.dropped > 0 {
+                format!(
+                    " ({} images the disk could not take in time are not in the movie)",
+                    self.dropped
+                )
+            } else {
+                String::new()
+            }
         )
     }
 }
 
 impl Recorder {
-    pub fn start(dir: PathBuf, first: u64, page: bool) -> Result<Self> {
-        std::fs::create_dir_all(dir.join("frames"))
+    pub fn start(dir: PathBuf, first: u64, page: bool, limits: Limits) -> Result<Self> {
+        let frames_dir = dir.join("frames");
+        std::fs::create_dir_all(&frames_dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
+        let (tx, rx) = sync_channel::<Vec<u8>>(QUEUE);
+        let writer = std::thread::Builder::new()
+            .name("parallax-record".into())
+            .spawn(move || {
+                lowest_priority();
+                let mut n = 0;
+                for png in rx {
+                    let p = frames_dir.join(format!("{n:05}.png"));
+                    std::fs::write(&p, png)
+                        .with_context(|| format!("{}: cannot write", p.display()))?;
+                    n += 1;
+                }
+                Ok(n)
+            })
+            .context("cannot start the recording's writer")?;
         Ok(Recorder {
             dir,
             first,
             page,
             frames: Vec::new(),
-            movie_frames: 0,
+            limits,
+            bytes: 0,
+            dropped: 0,
+            images: Some(tx),
+            writer: Some(writer),
         })
     }
 
@@ -79,8 +164,15 @@ impl Recorder {
         self.page
     }
 
-    /// Records one rendered frame and its streamed image (PNG).
-    pub fn frame(&mut self, fs: &FrameState, live: &LiveState, png: &[u8]) -> Result<()> {
+    /// Frames and image bytes so far.
+    pub fn progress(&self) -> (usize, u64) {
+        (self.frames.len(), self.bytes)
+    }
+
+    /// Records one rendered frame and hands its streamed image (PNG) to
+    /// the writer. An error is the writer's (the disk's): the recording is
+    /// over, the session goes on.
+    pub fn frame(&mut self, fs: &FrameState, live: &LiveState, png: &[u8]) -> Result<Step> {
         let mut state = fs.clone();
         state.frame -= self.first;
         self.frames.push(Recorded {
@@ -88,20 +180,57 @@ impl Recorder {
             tf: live.tf.clone(),
             tools: live.tools.clone(),
         });
-        let p = self
-            .dir
-            .join("frames")
-            .join(format!("{:05}.png", self.movie_frames));
-        std::fs::write(&p, png).with_context(|| format!("{}: cannot write", p.display()))?;
-        self.movie_frames += 1;
-        Ok(())
+        self.bytes += png.len() as u64;
+        if let Some(tx) = &self.images {
+            match tx.try_send(png.to_vec()) {
+                Ok(()) => {}
+                Err(TrySendError::Full(_)) => self.dropped += 1,
+                Err(TrySendError::Disconnected(_)) => {
+                    self.images = None;
+                    return match self.writer.take().map(JoinHandle::join) {
+                        Some(Ok(Err(e))) => Err(e),
+                        _ => Err(anyhow::anyhow!("the recording's writer stopped")),
+                    };
+                }
+            }
+        }
+        Ok(
+            if self.frames.len() >= self.limits.frames || self.bytes >= self.limits.bytes {
+                Step::Full
+            } else {
+                Step::Recording
+            },
+        )
     }
 
-    pub fn finish(self) -> Result<Done> {
+    /// Writes the script and (for a page's recording) the movie, once the
+    /// writer has written every queued image: on a thread of its own at the
+    /// lowest CPU priority, so the frame loop goes on at its pace; `done`
+    /// gets the outcome there.
+    pub fn finish(
+        mut self,
+        done: impl FnOnce(Result<Done>) + Send + 'static,
+    ) -> Result<JoinHandle<()>> {
+        std::thread::Builder::new()
+            .name("parallax-movie".into())
+            .spawn(move || {
+                lowest_priority();
+                done(self.write());
+            })
+            .context("cannot start the recording's encoder")
+    }
+
+    fn write(&mut self) -> Result<Done> {
+        self.images = None;
+        let written = match self.writer.take().map(JoinHandle::join) {
+            Some(Ok(r)) => r?,
+            Some(Err(_)) => anyhow::bail!("the recording's writer panicked"),
+            None => 0,
+        };
         let script = self.dir.join("script.toml");
         let file = script_of(&self.frames, &self.dir)?;
         file.write(&script)?;
-        let movie = if self.page && self.movie_frames > 0 {
+        let movie = if self.page && written > 0 {
             Some(write_movie(&self.dir)?)
         } else {
             None
@@ -110,7 +239,19 @@ impl Recorder {
             script,
             movie,
             frames: self.frames.len(),
+            dropped: self.dropped,
         })
+    }
+}
+
+/// Lowers the calling thread's CPU priority to the lowest (nice 19; the
+/// ffmpeg it starts inherits it): a recording's disk and encoding work
+/// yields to the frame loop and the renderers.
+fn lowest_priority() {
+    // SAFETY: setpriority on the calling thread's own id has no memory
+    // effects; a failure leaves the priority as it was.
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, 19);
     }
 }
 
