@@ -12,6 +12,7 @@
 //! Frames reach the clients through a `watch` channel, which holds only the
 //! newest: a slow or vanished client misses frames, never stalls the loop.
 
+mod listen;
 pub mod record;
 mod state;
 
@@ -278,12 +279,7 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
         let stop = async move {
             let _ = ended_rx.wait_for(|e| e.is_some()).await;
         };
-        if let Err(e) = axum::serve(listener, app)
-            .with_graceful_shutdown(stop)
-            .await
-        {
-            eprintln!("error: live server: {e}");
-        }
+        listen::serve(listener, app, stop).await;
     });
     {
         let shared = shared.clone();
