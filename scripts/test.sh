@@ -16,4 +16,9 @@ cargo test --release --locked --workspace 2>&1 | tee "$log" || status=$?
 echo
 awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
      END { printf "tests: %d passed, %d failed\n", p, f }' "$log"
+# Coverage-guided fuzzing of every parser, time-boxed (10 s a target; the
+# longer run is bench/fuzz.sh). A finding fails the test command.
+echo
+echo "fuzzing (scripts/fuzz.sh 10):"
+bash scripts/fuzz.sh 10 || status=1
 exit $status

@@ -21,6 +21,7 @@ fn main() {
     ensure_runtime_dir();
     parallax_backend::gpu::spread_cpu_device_work();
     init_logging();
+    parallax_backend::data::install_hook();
     if let Err(e) = parallax::cmd::run(Cli::parse().command) {
         eprintln!("error: {e:#}");
         std::process::exit(1);

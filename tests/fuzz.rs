@@ -187,19 +187,9 @@ fn fuzz(
     (ok, refused)
 }
 
-/// Reads a source through, slice by slice, unless its header claims more
-/// than a test should allocate (the import refuses those by its memory
-/// budget before reading).
+/// Reads a source through ([`harness::read_through`]).
 fn read_through(mut src: Box<dyn VolumeSource + Send>) -> anyhow::Result<()> {
-    let info = src.info().clone();
-    if info.voxel_count() > 1 << 22 || info.slice_len() > 1 << 20 {
-        return Ok(());
-    }
-    let mut slice = vec![0f32; info.slice_len()];
-    for _ in 0..info.dims[2] {
-        src.read_slices(&mut slice)?;
-    }
-    Ok(())
+    harness::read_through(src.as_mut())
 }
 
 fn small_volume() -> Volume {
@@ -463,5 +453,134 @@ transfer_function = \"tf.toml\"\n[[key]]\nframe = 10\nplacement = { rotation_deg
         let (ok, refused) = fuzz(what, 2000, &file, |r| mutate_text(r, seed), parse, &name);
         std::fs::write(&file, seed).unwrap();
         assert!(refused > 300, "{what}: {ok} {refused}");
+    }
+}
+
+/// The coverage-guided fuzzers' harness (`fuzz/src/lib.rs`), here without
+/// instrumentation: the same checks on the committed corpora and on every
+/// input a fuzzer once broke a parser with.
+#[path = "../fuzz/src/lib.rs"]
+mod harness;
+
+/// Every file of `fuzz/corpus/<target>/` (the seeds: real files of every
+/// format and encoding) and `fuzz/regressions/<target>/` (what the
+/// fuzzers found, each fixed) goes through its target's checks.
+#[test]
+fn the_fuzzers_corpora_and_regressions_replay() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz");
+    for target in harness::TARGETS {
+        let mut seeds = 0;
+        for kind in ["corpus", "regressions"] {
+            let Ok(dir) = std::fs::read_dir(root.join(kind).join(target)) else {
+                continue;
+            };
+            let mut files: Vec<PathBuf> = dir.map(|e| e.unwrap().path()).collect();
+            files.sort();
+            for f in files {
+                let input = std::fs::read(&f).unwrap();
+                let r = catch_unwind(AssertUnwindSafe(|| harness::run(target, &input)));
+                assert!(r.is_ok(), "{target}: {} broke the parser", f.display());
+                seeds += (kind == "corpus") as usize;
+            }
+        }
+        println!("{target}: {seeds} seeds");
+        assert!(
+            seeds >= 2,
+            "{target}: {seeds} seeds in fuzz/corpus/{target}"
+        );
+    }
+}
+
+/// The wire seeds: messages of every kind a rank sends, encoded by the
+/// protocol as it stands. With `PARALLAX_WRITE_SEEDS=1` they are written
+/// to `fuzz/corpus/wire/` (`fuzz/make_seeds.sh`); otherwise the committed
+/// ones must still decode, so the corpus follows the protocol.
+#[test]
+fn wire_seeds() {
+    use parallax_common::protocol::{decode, encode, FrameState, FrameStats, Ready, ToBackend};
+    use parallax_common::tools::{BandPicker, ClipPlane, Probe, Tool};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let tf =
+        parallax_common::tf::TransferFunction::load(root.join("configs/tf/ct-bone.toml")).unwrap();
+    let frame = FrameState {
+        frame: 7,
+        placement: parallax_common::camera::Placement {
+            center: [0.0, 0.01, -0.02],
+            rotation_deg: [10.0, 20.0, 0.0],
+            size: 0.25,
+        },
+        observer: [0.0, 0.0, 1.0],
+        eta: 0.5,
+        render: Default::default(),
+        tf_version: 2,
+        tools_version: 3,
+        stream: vec![0, 3],
+        pick: Some([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]),
+        grow: Some(0.05),
+    };
+    let tools = vec![
+        Tool::ClipPlane(ClipPlane {
+            point: [0.0; 3],
+            normal: [0.0, 0.0, 1.0],
+            thickness: 0.01,
+            context: [0.3, 0.7],
+        }),
+        Tool::Probe(Probe::new([0.0, 0.02, 0.0], 0.05)),
+        Tool::BandPicker(BandPicker {
+            band: [1.0, 2.0, 3.0, 4.0],
+            points: Some([1, 2]),
+            axis: [0.0, 0.0, 1.0],
+            alignment: [0.7, 0.95],
+        }),
+    ];
+    let stats = FrameStats {
+        rank: 1,
+        frame: 7,
+        views: 2,
+        render_ms: 12.5,
+        ready: Some(Ready {
+            protocol: 3,
+            build: "parallax 0.1.0".into(),
+            database: 42,
+        }),
+        ..Default::default()
+    };
+    let messages: Vec<(&str, Vec<u8>)> = vec![
+        ("to-frame", encode(&ToBackend::Frame(frame)).unwrap()),
+        (
+            "to-tf",
+            encode(&ToBackend::TransferFunction { version: 2, tf }).unwrap(),
+        ),
+        (
+            "to-tools",
+            encode(&ToBackend::Tools { version: 3, tools }).unwrap(),
+        ),
+        (
+            "to-present",
+            encode(&ToBackend::Present { frame: 7 }).unwrap(),
+        ),
+        ("to-quit", encode(&ToBackend::Quit).unwrap()),
+        ("stats", encode(&stats).unwrap()),
+    ];
+    let dir = root.join("fuzz/corpus/wire");
+    if std::env::var("PARALLAX_WRITE_SEEDS").is_ok() {
+        std::fs::create_dir_all(&dir).unwrap();
+        for (name, bytes) in &messages {
+            std::fs::write(dir.join(format!("{name}.bin")), bytes).unwrap();
+        }
+        return;
+    }
+    for (name, bytes) in &messages {
+        let committed = std::fs::read(dir.join(format!("{name}.bin"))).unwrap();
+        let ok = if name.starts_with("to-") {
+            decode::<ToBackend>(&committed).is_ok()
+        } else {
+            decode::<FrameStats>(&committed).is_ok()
+        };
+        assert!(
+            ok,
+            "fuzz/corpus/wire/{name}.bin no longer decodes: run fuzz/make_seeds.sh"
+        );
+        assert!(!bytes.is_empty());
     }
 }

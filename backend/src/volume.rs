@@ -27,6 +27,18 @@ pub enum VoxelType {
 }
 
 impl VoxelType {
+    /// Every sample type.
+    pub const ALL: [VoxelType; 8] = [
+        VoxelType::U8,
+        VoxelType::U16,
+        VoxelType::I16,
+        VoxelType::F32,
+        VoxelType::I8,
+        VoxelType::I32,
+        VoxelType::U32,
+        VoxelType::F64,
+    ];
+
     pub fn bytes(self) -> usize {
         match self {
             VoxelType::U8 | VoxelType::I8 => 1,

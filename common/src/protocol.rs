@@ -253,9 +253,18 @@ impl std::fmt::Display for Malformed {
 
 impl std::error::Error for Malformed {}
 
+/// The most a message's decoding may claim (bytes of strings, vectors):
+/// a length that a crafted or corrupt message declares is refused here,
+/// before it is allocated.
+pub const MAX_MESSAGE_BYTES: usize = 1 << 30;
+
 pub fn decode<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T> {
-    let (v, _) =
-        bincode::serde::decode_from_slice(bytes, config()).map_err(|e| Malformed(e.to_string()))?;
+    let (v, _) = bincode::serde::decode_from_slice(
+        bytes,
+        // config(), with the limit.
+        bincode::config::standard().with_limit::<MAX_MESSAGE_BYTES>(),
+    )
+    .map_err(|e| Malformed(e.to_string()))?;
     Ok(v)
 }
 

@@ -147,12 +147,29 @@ fn is_dicom(path: &Path) -> bool {
         && &head[128..132] == b"DICM"
 }
 
+/// Refuses a file whose element lengths run past its end before dicom-rs
+/// allocates them ([`super::dicom_lengths`]); files over 512 MiB (no slice
+/// is) are left to dicom-rs.
+fn check_lengths(path: &Path, label: &str) -> Result<()> {
+    let size = std::fs::metadata(path)
+        .with_context(|| format!("{label}: cannot read"))?
+        .len();
+    if size <= 512 << 20 {
+        let bytes = std::fs::read(path).with_context(|| format!("{label}: cannot read"))?;
+        super::dicom_lengths::check(label, &bytes)?;
+    }
+    Ok(())
+}
+
 fn read_meta(path: &Path) -> Result<SliceMeta> {
     let label = path.display().to_string();
-    let obj = OpenFileOptions::new()
-        .read_until(tags::PIXEL_DATA)
-        .open_file(path)
-        .with_context(|| format!("{label}: not a readable DICOM file"))?;
+    check_lengths(path, &label)?;
+    let obj = super::contain::contained(&label, "the DICOM parser", || {
+        OpenFileOptions::new()
+            .read_until(tags::PIXEL_DATA)
+            .open_file(path)
+            .with_context(|| format!("{label}: not a readable DICOM file"))
+    })?;
     let spacing = floats(&obj, tags::PIXEL_SPACING, "PixelSpacing", 2, &label)?;
     let orientation = floats(
         &obj,
@@ -551,19 +568,22 @@ impl DicomSource {
     fn decode_slice(&self, k: usize, out: &mut [f32]) -> Result<()> {
         let m = &self.slices[k];
         let label = format!("{}: {}", self.label, file_name(&m.path));
-        let obj =
-            dicom_object::open_file(&m.path).with_context(|| format!("{label}: cannot read"))?;
-        let pixels = obj.decode_pixel_data().with_context(|| {
-            format!(
-                "{label}: cannot decode the pixel data (TransferSyntaxUID (0002,0010) {}{})",
-                m.transfer_syntax,
-                syntax_name(&m.transfer_syntax)
-            )
+        check_lengths(&m.path, &label)?;
+        let raw: Vec<f64> = super::contain::contained(&label, "the DICOM decoder", || {
+            let obj = dicom_object::open_file(&m.path)
+                .with_context(|| format!("{label}: cannot read"))?;
+            let pixels = obj.decode_pixel_data().with_context(|| {
+                format!(
+                    "{label}: cannot decode the pixel data (TransferSyntaxUID (0002,0010) {}{})",
+                    m.transfer_syntax,
+                    syntax_name(&m.transfer_syntax)
+                )
+            })?;
+            let opts = ConvertOptions::new().with_modality_lut(ModalityLutOption::None);
+            pixels
+                .to_vec_frame_with_options(0, &opts)
+                .with_context(|| format!("{label}: converting the pixel data"))
         })?;
-        let opts = ConvertOptions::new().with_modality_lut(ModalityLutOption::None);
-        let raw: Vec<f64> = pixels
-            .to_vec_frame_with_options(0, &opts)
-            .with_context(|| format!("{label}: converting the pixel data"))?;
         ensure!(
             raw.len() == out.len(),
             "{label}: the pixel data holds {} values, Rows × Columns is {}",

@@ -11,7 +11,10 @@
 //! Errors name the file and the field or voxel at fault, because the person
 //! reading them is usually looking at a header in a text editor.
 
+mod contain;
+pub use contain::install_hook;
 pub mod dicom;
+mod dicom_lengths;
 pub mod nifti;
 pub mod nrrd;
 pub mod presets;

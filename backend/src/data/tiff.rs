@@ -46,9 +46,11 @@ fn open_decoder(path: &Path) -> Result<TiffDecoder> {
     let mut limits = Limits::default();
     // A page of a large scan may exceed the crate's 256 MiB default.
     limits.decoding_buffer_size = 1 << 32;
-    Ok(Decoder::new(BufReader::with_capacity(1 << 20, f))
-        .with_context(|| format!("{label}: not a TIFF file"))?
-        .with_limits(limits))
+    let dec = super::contain::contained(&label.to_string(), "the TIFF decoder", || {
+        Decoder::new(BufReader::with_capacity(1 << 20, f))
+            .with_context(|| format!("{label}: not a TIFF file"))
+    })?;
+    Ok(dec.with_limits(limits))
 }
 
 /// Orders names as people number slices: digit runs compare by value.
@@ -169,8 +171,10 @@ pub fn open_tiff(path: &Path, spacing: Option<[f64; 3]>) -> Result<TiffSource> {
         let mut dec = open_decoder(path)?;
         let mut n = 1;
         while dec.more_images() {
-            dec.next_image()
-                .with_context(|| format!("{label}: page {}: broken page chain", n + 1))?;
+            super::contain::contained(&label, "the TIFF decoder", || {
+                dec.next_image()
+                    .with_context(|| format!("{label}: page {}: broken page chain", n + 1))
+            })?;
             n += 1;
         }
         (None, open_decoder(path)?, n, label.clone())
@@ -255,16 +259,19 @@ impl TiffSource {
                     t.name(),
                     self.info.voxel_type.name()
                 );
-                let r = dec
-                    .read_image()
-                    .with_context(|| format!("{l}: reading the image"));
+                let r = super::contain::contained(&l, "the TIFF decoder", || {
+                    dec.read_image()
+                        .with_context(|| format!("{l}: reading the image"))
+                });
                 (l, r)
             }
             Pages::Multi(dec) => {
                 let l = format!("{}: page {} of {nz}", self.label, k + 1);
                 if k > 0 {
-                    dec.next_image()
-                        .with_context(|| format!("{l}: broken page chain"))?;
+                    super::contain::contained(&l, "the TIFF decoder", || {
+                        dec.next_image()
+                            .with_context(|| format!("{l}: broken page chain"))
+                    })?;
                 }
                 let (w, h, _) = page_shape(dec, &l)?;
                 ensure!(
@@ -273,9 +280,10 @@ impl TiffSource {
                     self.info.dims[0],
                     self.info.dims[1]
                 );
-                let r = dec
-                    .read_image()
-                    .with_context(|| format!("{l}: reading the image"));
+                let r = super::contain::contained(&l, "the TIFF decoder", || {
+                    dec.read_image()
+                        .with_context(|| format!("{l}: reading the image"))
+                });
                 (l, r)
             }
         };

@@ -48,6 +48,11 @@ pub fn bincode_config() -> impl bincode::config::Config {
     bincode::config::standard()
         .with_little_endian()
         .with_fixed_int_encoding()
+        // What decoding a header or node table may claim: a length that a
+        // crafted file declares is refused before it is allocated (the
+        // limit changes nothing written). 1 GiB of node table is about 16
+        // million nodes.
+        .with_limit::<{ 1 << 30 }>()
 }
 
 /// What is known before any voxel is read.

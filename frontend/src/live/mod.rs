@@ -166,9 +166,7 @@ impl Shared {
                 live.grow = Some((index, tolerance));
             }
             other => {
-                let mut next = live.state.clone();
-                next.apply(other, display)
-                    .map_err(|e| format!("refused: {e:#}"))?;
+                let next = applied(&live.state, other, display)?;
                 if next == live.state {
                     return Ok(());
                 }
@@ -180,6 +178,52 @@ impl Shared {
         }
         self.wake.notify_all();
         Ok(())
+    }
+}
+
+/// A state-changing message applied to a copy of `state`: the state it
+/// leads to, or the refusal the page is sent (the state is unchanged).
+fn applied(
+    state: &LiveState,
+    msg: ClientMsg,
+    display: &Display,
+) -> std::result::Result<LiveState, String> {
+    let mut next = state.clone();
+    next.apply(msg, display)
+        .map_err(|e| format!("refused: {e:#}"))?;
+    Ok(next)
+}
+
+/// What the server makes of one page message on its own (the fuzzer's
+/// entry, `fuzz/`): the state it leads to, or the refusal. A focus or
+/// grow-band is checked up to the ray it would pick; quit changes nothing.
+pub fn apply_message(
+    state: &LiveState,
+    display: &Display,
+    text: &str,
+) -> std::result::Result<LiveState, String> {
+    let msg: ClientMsg = serde_json::from_str(text).map_err(|e| format!("refused: {e}"))?;
+    match msg {
+        ClientMsg::Quit => Ok(state.clone()),
+        ClientMsg::Focus { x, y } => state
+            .focus_ray(display, x, y)
+            .map(|_| state.clone())
+            .map_err(|e| format!("refused: focus: {e}")),
+        ClientMsg::GrowBand {
+            index,
+            x,
+            y,
+            tolerance,
+        } => {
+            state
+                .check_grow(index, tolerance.unwrap_or(state::GROW_TOLERANCE))
+                .map_err(|e| format!("refused: {e}"))?;
+            state
+                .focus_ray(display, x, y)
+                .map(|_| state.clone())
+                .map_err(|e| format!("refused: grow-band: {e}"))
+        }
+        other => applied(state, other, display),
     }
 }
 

@@ -34,16 +34,7 @@ fn test_values(t: VoxelType, n: usize) -> Vec<f32> {
 fn write_read_round_trip_each_type() {
     let dir = tempfile::tempdir().unwrap();
     let dims = [5, 4, 3];
-    for t in [
-        VoxelType::U8,
-        VoxelType::U16,
-        VoxelType::I16,
-        VoxelType::F32,
-        VoxelType::I8,
-        VoxelType::I32,
-        VoxelType::U32,
-        VoxelType::F64,
-    ] {
+    for t in VoxelType::ALL {
         let path = dir.path().join(format!("rt-{}.nrrd", t.name()));
         let values = test_values(t, 60);
         let mut w = NrrdWriter::create(&path, dims, t, [0.5, 1.25, 3.0]).unwrap();
