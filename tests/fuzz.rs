@@ -462,6 +462,10 @@ transfer_function = \"tf.toml\"\n[[key]]\nframe = 10\nplacement = { rotation_deg
 #[path = "../fuzz/src/lib.rs"]
 mod harness;
 
+/// As the binary and the fuzzer: decoders' single allocations capped.
+#[global_allocator]
+static ALLOC: parallax_backend::data::CappedAlloc = parallax_backend::data::CappedAlloc;
+
 /// Every file of `fuzz/corpus/<target>/` (the seeds: real files of every
 /// format and encoding) and `fuzz/regressions/<target>/` (what the
 /// fuzzers found, each fixed) goes through its target's checks.

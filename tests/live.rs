@@ -1205,7 +1205,7 @@ fn latency_of_input_to_frame() {
             let mut render = Vec::new();
             for i in 0..n {
                 let t = Instant::now();
-                let dy = if i % 2 == 0 { 0.5 } else { -0.5 };
+                let dy = if i.is_multiple_of(2) { 0.5 } else { -0.5 };
                 let want = c
                     .change(json!({"type": "rotate", "dx": 1.0, "dy": dy}))
                     .await;
@@ -1509,4 +1509,322 @@ fn connections_that_never_finish_their_header_are_capped_and_closed() {
         b.send(json!({"type": "quit"})).await;
     });
     server.join().unwrap().unwrap();
+}
+
+/// What one client driving the session saw over a phase of the soak.
+struct Driven {
+    inputs: usize,
+    seconds: f64,
+    slowest_ms: f64,
+    median_ms: f64,
+    /// Resident memory [rank 1, rank 2, rank 0] at the phase's start and end.
+    rss: [Vec<u64>; 2],
+}
+
+/// Rotates a step and waits for the frame rendered from it, again and
+/// again, for `secs`.
+async fn drive(c: &mut Client, secs: u64) -> Driven {
+    let start = Instant::now();
+    let (mut latency, mut rss) = (Vec::new(), Vec::new());
+    let mut i = 0usize;
+    while start.elapsed() < Duration::from_secs(secs) {
+        let t = Instant::now();
+        let dy = if i.is_multiple_of(2) { 0.5 } else { -0.5 };
+        let want = c
+            .change(json!({"type": "rotate", "dx": 1.0, "dy": dy}))
+            .await;
+        let f = loop {
+            let f = c.next_frame().await;
+            if f.version() >= want {
+                break f;
+            }
+        };
+        latency.push(t.elapsed().as_secs_f64() * 1e3);
+        let stats = f.header["stats"].as_array().unwrap();
+        let mut row: Vec<u64> = stats
+            .iter()
+            .map(|s| s["rss_bytes"].as_u64().unwrap())
+            .collect();
+        row.push(f.header["coordinator_rss_bytes"].as_u64().unwrap());
+        if rss.is_empty() {
+            rss.push(row.clone());
+        }
+        rss.truncate(1);
+        rss.push(row);
+        i += 1;
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    latency.sort_by(f64::total_cmp);
+    Driven {
+        inputs: i,
+        seconds,
+        slowest_ms: *latency.last().unwrap(),
+        median_ms: latency[latency.len() / 2],
+        rss: [rss[0].clone(), rss[rss.len() - 1].clone()],
+    }
+}
+
+/// The hostile clients of the soak, each bounded in rate, until `stop`:
+/// counts of what each did.
+async fn hostile(
+    url: String,
+    addr: String,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> Value {
+    use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+    use std::sync::Arc;
+    use tokio::io::AsyncWriteExt;
+    let ws_url = url
+        .replace("http://", "ws://")
+        .replace("/?token=", "/ws?token=");
+    let n: Arc<[AtomicU64; 7]> = Arc::new(Default::default());
+    let going = move || !stop.load(Relaxed);
+    let mut tasks = Vec::new();
+    // 0: a flood of rotations as fast as the socket takes them, never read.
+    {
+        let (ws_url, n, going) = (ws_url.clone(), n.clone(), going.clone());
+        tasks.push(tokio::spawn(async move {
+            let (mut ws, _) = tokio_tungstenite::connect_async(&ws_url).await.unwrap();
+            while going() {
+                let m = json!({"type": "rotate", "dx": 0.1, "dy": 0.0}).to_string();
+                if ws.send(Message::Text(m.into())).await.is_err() {
+                    break;
+                }
+                n[0].fetch_add(1, Relaxed);
+                if n[0].load(Relaxed).is_multiple_of(200) {
+                    tokio::time::sleep(Duration::from_millis(10)).await;
+                }
+            }
+        }));
+    }
+    // 1: messages of 2 MiB, twice a second (each closes its socket).
+    {
+        let (ws_url, n, going) = (ws_url.clone(), n.clone(), going.clone());
+        tasks.push(tokio::spawn(async move {
+            let big = format!(
+                "{{\"type\": \"rotate\", \"pad\": \"{}\"}}",
+                "x".repeat(2 << 20)
+            );
+            while going() {
+                if let Ok((mut ws, _)) = tokio_tungstenite::connect_async(&ws_url).await {
+                    let _ = ws.send(Message::Text(big.clone().into())).await;
+                    while let Some(Ok(_)) = ws.next().await {}
+                    n[1].fetch_add(1, Relaxed);
+                }
+                tokio::time::sleep(Duration::from_millis(500)).await;
+            }
+        }));
+    }
+    // 2: 40 sockets that never finish their request header, reopened as
+    // the server closes them.
+    {
+        let (addr, n, going) = (addr.clone(), n.clone(), going.clone());
+        tasks.push(tokio::spawn(async move {
+            let mut idle = Vec::new();
+            while going() {
+                idle.retain(|s: &tokio::net::TcpStream| s.peer_addr().is_ok());
+                while idle.len() < 40 {
+                    let Ok(mut s) = tokio::net::TcpStream::connect(&addr).await else {
+                        break;
+                    };
+                    let _ = s.write_all(b"GET /ws HTTP/1.1\r\nHost: x\r\n").await;
+                    idle.push(s);
+                    n[2].fetch_add(1, Relaxed);
+                }
+                tokio::time::sleep(Duration::from_millis(500)).await;
+                // Probe which are closed: a closed socket fails a write.
+                let mut open = Vec::new();
+                for mut s in idle.drain(..) {
+                    if s.write_all(b"X").await.is_ok() {
+                        open.push(s);
+                    }
+                }
+                idle = open;
+            }
+        }));
+    }
+    // 3: a reconnect storm: pages that connect, read their hello and go,
+    // 20 a second.
+    {
+        let (ws_url, n, going) = (ws_url.clone(), n.clone(), going.clone());
+        tasks.push(tokio::spawn(async move {
+            while going() {
+                if let Ok((mut ws, _)) = tokio_tungstenite::connect_async(&ws_url).await {
+                    let _ = ws.next().await;
+                    n[3].fetch_add(1, Relaxed);
+                }
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }));
+    }
+    // 4: garbage and refused values, 10 a second, answers read.
+    {
+        let (ws_url, n, going) = (ws_url.clone(), n.clone(), going.clone());
+        tasks.push(tokio::spawn(async move {
+            let (mut ws, _) = tokio_tungstenite::connect_async(&ws_url).await.unwrap();
+            let bad = [
+                "{",
+                "null",
+                "{\"type\": \"zoom\", \"factor\": 1e300}",
+                "{\"type\": \"pan\", \"dx\": 1e9, \"dy\": 0}",
+                "{\"type\": \"tool\", \"index\": 99}",
+                "[1,2,3]",
+            ];
+            let mut i = 0;
+            while going() {
+                let _ = ws.send(Message::Text(bad[i % bad.len()].into())).await;
+                i += 1;
+                n[4].fetch_add(1, Relaxed);
+                let _ = tokio::time::timeout(Duration::from_millis(100), async {
+                    while let Some(Ok(_)) = ws.next().await {}
+                })
+                .await;
+            }
+        }));
+    }
+    // 5: a recording started every 20 s and stopped 10 s later.
+    {
+        let (ws_url, n, going) = (ws_url.clone(), n.clone(), going.clone());
+        tasks.push(tokio::spawn(async move {
+            let (mut ws, _) = tokio_tungstenite::connect_async(&ws_url).await.unwrap();
+            let mut on = false;
+            while going() {
+                on = !on;
+                let m = json!({"type": "record", "on": on}).to_string();
+                let _ = ws.send(Message::Text(m.into())).await;
+                n[5].fetch_add(1, Relaxed);
+                let wait = Duration::from_secs(10);
+                let _ = tokio::time::timeout(wait, async {
+                    while let Some(Ok(_)) = ws.next().await {}
+                })
+                .await;
+            }
+            let m = json!({"type": "record", "on": false}).to_string();
+            let _ = ws.send(Message::Text(m.into())).await;
+        }));
+    }
+    // 6: a page that reads nothing at all.
+    {
+        let (ws_url, n) = (ws_url.clone(), n.clone());
+        tasks.push(tokio::spawn(async move {
+            let (_ws, _) = tokio_tungstenite::connect_async(&ws_url).await.unwrap();
+            n[6].fetch_add(1, Relaxed);
+            while going() {
+                tokio::time::sleep(Duration::from_millis(200)).await;
+            }
+        }));
+    }
+    for t in tasks {
+        let _ = t.await;
+    }
+    let v = |i: usize| n[i].load(Relaxed);
+    json!({
+        "flood messages": v(0), "oversize messages": v(1), "idle header sockets opened": v(2),
+        "reconnects": v(3), "garbage messages": v(4), "record toggles": v(5), "silent pages": v(6),
+    })
+}
+
+/// The live soak (issue 38; `bench/live_soak.sh`, not in the test command):
+/// `serve` of the 16-projector wall under `mpirun -n 3`, driven by one
+/// client for a quiet phase, then for `PARALLAX_SOAK_SECS` (default 600)
+/// beside a hostile mix: a flood never read, 2 MiB messages, 40 sockets
+/// that never finish their header, a reconnect storm, garbage, recordings
+/// started and stopped, a page that reads nothing. Every 10 s a new page
+/// connects and times its first frame. Passes when the driving client's
+/// rate stays within 20 % of the quiet one, no input waits over 5 s, every
+/// new page is served within 2 s, and no rank's memory grows by more than
+/// 32 MiB.
+#[test]
+#[ignore]
+fn a_hostile_client_mix_neither_stalls_the_session_nor_grows_its_memory() {
+    let secs: u64 = std::env::var("PARALLAX_SOAK_SECS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(600);
+    let quiet_secs = (secs / 5).clamp(10, 120);
+    let w = World::new([48, 36]);
+    let scene = w.path("wall-scene.toml");
+    let rec = w.path("recordings");
+    let (child, url) = serve_mpi(&[
+        "--scene",
+        s(&scene),
+        "--record-dir",
+        s(&rec),
+        "--record-max-frames",
+        "2000",
+    ]);
+    let addr = url
+        .trim_start_matches("http://")
+        .split('/')
+        .next()
+        .unwrap()
+        .to_string();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let mut c = Client::connect(&url).await;
+        c.settled(1).await;
+        drive(&mut c, 10).await; // warm-up
+        let quiet = drive(&mut c, quiet_secs).await;
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let mix = tokio::spawn(hostile(url.clone(), addr, stop.clone()));
+        let newcomers = {
+            let (url, stop) = (url.clone(), stop.clone());
+            tokio::spawn(async move {
+                let mut worst = 0.0f64;
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    tokio::time::sleep(Duration::from_secs(10)).await;
+                    let t = Instant::now();
+                    let mut p = Client::connect(&url).await;
+                    p.next_frame().await;
+                    worst = worst.max(t.elapsed().as_secs_f64());
+                }
+                worst
+            })
+        };
+        let loud = drive(&mut c, secs).await;
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        let counts = mix.await.unwrap();
+        let newcomer_worst = newcomers.await.unwrap();
+        c.send(json!({"type": "quit"})).await;
+        let rate = |d: &Driven| d.inputs as f64 / d.seconds;
+        println!(
+            "quiet: {} inputs in {:.0} s ({:.2}/s), median {:.1} ms, slowest {:.1} ms",
+            quiet.inputs, quiet.seconds, rate(&quiet), quiet.median_ms, quiet.slowest_ms
+        );
+        println!(
+            "hostile: {} inputs in {:.0} s ({:.2}/s, {:.2} of quiet), median {:.1} ms, slowest {:.1} ms; \
+             a new page's first frame within {:.2} s at worst",
+            loud.inputs,
+            loud.seconds,
+            rate(&loud),
+            rate(&loud) / rate(&quiet),
+            loud.median_ms,
+            loud.slowest_ms,
+            newcomer_worst
+        );
+        println!("the hostile mix: {counts}");
+        let mib = |v: &Vec<u64>| v.iter().map(|b| b / (1 << 20)).collect::<Vec<_>>();
+        println!(
+            "resident memory (MiB) [rank 1, rank 2, rank 0]: quiet start {:?}, hostile start {:?}, end {:?}",
+            mib(&quiet.rss[0]),
+            mib(&loud.rss[0]),
+            mib(&loud.rss[1])
+        );
+        assert!(rate(&loud) >= 0.8 * rate(&quiet), "the mix slowed the session");
+        assert!(loud.slowest_ms < 5000.0, "an input waited {} ms", loud.slowest_ms);
+        assert!(newcomer_worst < 2.0, "a new page waited {newcomer_worst:.2} s");
+        for k in 0..3 {
+            let growth = loud.rss[1][k] as f64 - quiet.rss[0][k] as f64;
+            assert!(
+                growth < 32.0 * (1 << 20) as f64,
+                "rank column {k}: resident memory grew by {:.1} MiB",
+                growth / (1 << 20) as f64
+            );
+        }
+    });
+    wait_ok(child);
 }

@@ -14,6 +14,9 @@ fn target() -> &'static str {
     })
 }
 
+#[global_allocator]
+static ALLOC: parallax_backend::data::CappedAlloc = parallax_backend::data::CappedAlloc;
+
 fuzz_target!(|data: &[u8]| {
     parallax_fuzz::run(target(), data);
 });

@@ -147,6 +147,15 @@ fn is_dicom(path: &Path) -> bool {
         && &head[128..132] == b"DICM"
 }
 
+/// The largest single allocation dicom-rs may make for one file: 256 MiB
+/// (a 65535² slice of 16 bits is 8 GiB, a real one a few MiB), or 16× the
+/// file for a compressed one. A crafted length above it is an error, not
+/// gigabytes touched.
+fn decode_cap(path: &Path) -> usize {
+    let size = std::fs::metadata(path).map_or(0, |m| m.len() as usize);
+    (256 << 20usize).max(size.saturating_mul(16))
+}
+
 /// Refuses a file whose element lengths run past its end before dicom-rs
 /// allocates them ([`super::dicom_lengths`]); files over 512 MiB (no slice
 /// is) are left to dicom-rs.
@@ -164,7 +173,7 @@ fn check_lengths(path: &Path, label: &str) -> Result<()> {
 fn read_meta(path: &Path) -> Result<SliceMeta> {
     let label = path.display().to_string();
     check_lengths(path, &label)?;
-    let obj = super::contain::contained(&label, "the DICOM parser", || {
+    let obj = super::contain::contained(&label, "the DICOM parser", decode_cap(path), || {
         OpenFileOptions::new()
             .read_until(tags::PIXEL_DATA)
             .open_file(path)
@@ -569,21 +578,22 @@ impl DicomSource {
         let m = &self.slices[k];
         let label = format!("{}: {}", self.label, file_name(&m.path));
         check_lengths(&m.path, &label)?;
-        let raw: Vec<f64> = super::contain::contained(&label, "the DICOM decoder", || {
-            let obj = dicom_object::open_file(&m.path)
-                .with_context(|| format!("{label}: cannot read"))?;
-            let pixels = obj.decode_pixel_data().with_context(|| {
-                format!(
+        let raw: Vec<f64> =
+            super::contain::contained(&label, "the DICOM decoder", decode_cap(&m.path), || {
+                let obj = dicom_object::open_file(&m.path)
+                    .with_context(|| format!("{label}: cannot read"))?;
+                let pixels = obj.decode_pixel_data().with_context(|| {
+                    format!(
                     "{label}: cannot decode the pixel data (TransferSyntaxUID (0002,0010) {}{})",
                     m.transfer_syntax,
                     syntax_name(&m.transfer_syntax)
                 )
+                })?;
+                let opts = ConvertOptions::new().with_modality_lut(ModalityLutOption::None);
+                pixels
+                    .to_vec_frame_with_options(0, &opts)
+                    .with_context(|| format!("{label}: converting the pixel data"))
             })?;
-            let opts = ConvertOptions::new().with_modality_lut(ModalityLutOption::None);
-            pixels
-                .to_vec_frame_with_options(0, &opts)
-                .with_context(|| format!("{label}: converting the pixel data"))
-        })?;
         ensure!(
             raw.len() == out.len(),
             "{label}: the pixel data holds {} values, Rows × Columns is {}",

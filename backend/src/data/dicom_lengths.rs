@@ -108,16 +108,24 @@ fn walk(label: &str, bytes: &[u8], mut pos: usize, enc: Encoding) -> Result<()> 
             // Items and delimiters: a tag and a 4-byte length, no VR.
             let len = u32_at(bytes, pos + 4, enc.big);
             pos += 8;
+            if len != UNDEFINED {
+                fits(label, bytes, pos, tag, len)?;
+            }
+            // A delimiter's length should be 0; dicom-rs reads what it
+            // declares as a value, and so it is skipped here.
+            let defined = if len == UNDEFINED { 0 } else { len as usize };
             if tag == SEQUENCE_END {
                 fragments = false;
-            } else if tag == ITEM && len != UNDEFINED {
-                fits(label, bytes, pos, tag, len)?;
+                pos += defined;
+            } else if tag == ITEM_END {
+                pos += defined;
+            } else if tag == ITEM {
                 // A fragment's bytes are skipped; an item's data set is
                 // walked into.
                 if fragments {
-                    pos += len as usize;
+                    pos += defined;
                 }
-            } else if tag != ITEM && tag != ITEM_END {
+            } else {
                 bail!(
                     "{label}: ({:04X},{:04X}) is not an item or delimiter tag",
                     tag.0,

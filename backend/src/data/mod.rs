@@ -12,7 +12,7 @@
 //! reading them is usually looking at a header in a text editor.
 
 mod contain;
-pub use contain::install_hook;
+pub use contain::{install_hook, CappedAlloc};
 pub mod dicom;
 mod dicom_lengths;
 pub mod nifti;

@@ -46,10 +46,11 @@ fn open_decoder(path: &Path) -> Result<TiffDecoder> {
     let mut limits = Limits::default();
     // A page of a large scan may exceed the crate's 256 MiB default.
     limits.decoding_buffer_size = 1 << 32;
-    let dec = super::contain::contained(&label.to_string(), "the TIFF decoder", || {
-        Decoder::new(BufReader::with_capacity(1 << 20, f))
-            .with_context(|| format!("{label}: not a TIFF file"))
-    })?;
+    let dec =
+        super::contain::contained(&label.to_string(), "the TIFF decoder", usize::MAX, || {
+            Decoder::new(BufReader::with_capacity(1 << 20, f))
+                .with_context(|| format!("{label}: not a TIFF file"))
+        })?;
     Ok(dec.with_limits(limits))
 }
 
@@ -171,7 +172,7 @@ pub fn open_tiff(path: &Path, spacing: Option<[f64; 3]>) -> Result<TiffSource> {
         let mut dec = open_decoder(path)?;
         let mut n = 1;
         while dec.more_images() {
-            super::contain::contained(&label, "the TIFF decoder", || {
+            super::contain::contained(&label, "the TIFF decoder", usize::MAX, || {
                 dec.next_image()
                     .with_context(|| format!("{label}: page {}: broken page chain", n + 1))
             })?;
@@ -259,7 +260,7 @@ impl TiffSource {
                     t.name(),
                     self.info.voxel_type.name()
                 );
-                let r = super::contain::contained(&l, "the TIFF decoder", || {
+                let r = super::contain::contained(&l, "the TIFF decoder", usize::MAX, || {
                     dec.read_image()
                         .with_context(|| format!("{l}: reading the image"))
                 });
@@ -268,7 +269,7 @@ impl TiffSource {
             Pages::Multi(dec) => {
                 let l = format!("{}: page {} of {nz}", self.label, k + 1);
                 if k > 0 {
-                    super::contain::contained(&l, "the TIFF decoder", || {
+                    super::contain::contained(&l, "the TIFF decoder", usize::MAX, || {
                         dec.next_image()
                             .with_context(|| format!("{l}: broken page chain"))
                     })?;
@@ -280,7 +281,7 @@ impl TiffSource {
                     self.info.dims[0],
                     self.info.dims[1]
                 );
-                let r = super::contain::contained(&l, "the TIFF decoder", || {
+                let r = super::contain::contained(&l, "the TIFF decoder", usize::MAX, || {
                     dec.read_image()
                         .with_context(|| format!("{l}: reading the image"))
                 });
