@@ -2,20 +2,23 @@
 //! `axum::serve` so that a client that never finishes its request cannot
 //! hold the server: a connection must send its whole request header within
 //! [`HEADER_TIMEOUT`], and at most [`MAX_PENDING`] connections may be
-//! still sending one (a connection past that is closed at once; a page
-//! that loses the race connects again). Pages once connected are capped
-//! by `MAX_CLIENTS` where the WebSocket is accepted.
+//! still sending one. A connection past that closes the one that has been
+//! sending its header longest (sockets left open on purpose are the
+//! oldest; a page's header takes milliseconds), so idle sockets cannot
+//! keep a page out. Pages once connected are capped by `MAX_CLIENTS` where
+//! the WebSocket is accepted.
 
 use axum::Router;
 use hyper::body::Incoming;
 use hyper::Request;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::service::TowerToHyperService;
+use std::collections::VecDeque;
 use std::future::Future;
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
 use tokio::net::TcpListener;
-use tokio::sync::Semaphore;
 use tower::ServiceExt;
 
 /// Connections still sending their request header, at most.
@@ -24,9 +27,16 @@ pub const MAX_PENDING: usize = 32;
 /// How long a connection may take to send its request header.
 pub const HEADER_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// A connection still sending its request header.
+struct Pending {
+    /// Cleared when its first request's header is read.
+    sending: Arc<AtomicBool>,
+    task: tokio::task::AbortHandle,
+}
+
 /// Serves `app` on `listener` until `stop` completes.
 pub async fn serve(listener: TcpListener, app: Router, stop: impl Future<Output = ()>) {
-    let pending = Arc::new(Semaphore::new(MAX_PENDING));
+    let mut pending: VecDeque<Pending> = VecDeque::new();
     tokio::pin!(stop);
     loop {
         let stream = tokio::select! {
@@ -41,19 +51,21 @@ pub async fn serve(listener: TcpListener, app: Router, stop: impl Future<Output 
             },
             _ = &mut stop => return,
         };
-        let Ok(permit) = pending.clone().try_acquire_owned() else {
-            drop(stream);
-            continue;
-        };
+        pending.retain(|p| p.sending.load(Ordering::Relaxed) && !p.task.is_finished());
+        while pending.len() >= MAX_PENDING {
+            if let Some(oldest) = pending.pop_front() {
+                oldest.task.abort();
+            }
+        }
         // Frames go out as soon as they are written (a header and its
         // image are two messages: Nagle's algorithm would hold the second).
         let _ = stream.set_nodelay(true);
-        // Released when the first request's header is read.
-        let permit = Arc::new(Mutex::new(Some(permit)));
+        let sending = Arc::new(AtomicBool::new(true));
         let app = app.clone();
-        tokio::spawn(async move {
+        let flag = sending.clone();
+        let task = tokio::spawn(async move {
             let svc = tower::service_fn(move |req: Request<Incoming>| {
-                permit.lock().unwrap().take();
+                flag.store(false, Ordering::Relaxed);
                 app.clone().oneshot(req)
             });
             let _ = hyper::server::conn::http1::Builder::new()
@@ -62,6 +74,10 @@ pub async fn serve(listener: TcpListener, app: Router, stop: impl Future<Output 
                 .serve_connection(TokioIo::new(stream), TowerToHyperService::new(svc))
                 .with_upgrades()
                 .await;
+        });
+        pending.push_back(Pending {
+            sending,
+            task: task.abort_handle(),
         });
     }
 }
