@@ -657,3 +657,65 @@ fn ranks_that_disagree_stop_the_run_before_the_first_frame() {
         );
     }
 }
+
+/// The real case behind `database:2:0` above: each rank opens the scene's
+/// volume path on its own machine, and one machine's copy differs. Here
+/// back end 2 runs in a mount namespace of its own (`unshare -m`, root)
+/// where that path holds another import of the same data (bricks of 8,
+/// not 16): the run stops before the first frame, naming the rank.
+#[test]
+fn a_rank_reading_another_copy_of_the_volume_stops_the_run() {
+    let permitted = Command::new("unshare")
+        .args(["-m", "true"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !permitted {
+        println!("skipped: unshare -m is not permitted here (needs root)");
+        return;
+    }
+    let w = World::new();
+    let other = w.path("other.pxo");
+    let imported = run(&[
+        "import",
+        s(&w.path("v.nrrd")),
+        "-o",
+        s(&other),
+        "--brick",
+        "8",
+    ]);
+    assert!(imported.status.success(), "{}", text(&imported));
+    let scene = w.path("scene.toml");
+    let out = w.path("out");
+    let args = w.render_args(&out, &scene).join(" ");
+    let t = std::time::Instant::now();
+    let o = Command::new("timeout")
+        .arg("120")
+        .arg("mpirun")
+        .args(["-n", "2", bin()])
+        .args(w.render_args(&out, &scene))
+        .args([":", "-n", "1", "unshare", "-m", "sh", "-c"])
+        .arg(format!(
+            "mount --bind '{}' '{}' && exec '{}' {args}",
+            s(&other),
+            s(&w.path("v.pxo")),
+            bin()
+        ))
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
+        .output()
+        .unwrap();
+    println!("{}", text(&o));
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("back end 2 reads another database than back end 1"),
+        "{}",
+        text(&o)
+    );
+    assert!(!out.join("frame_00000").exists(), "a frame was rendered");
+    assert!(
+        t.elapsed() < Duration::from_secs(60),
+        "took {:?}",
+        t.elapsed()
+    );
+}

@@ -4,8 +4,9 @@
 //! [`HEADER_TIMEOUT`], and at most [`MAX_PENDING`] connections may be
 //! still sending one. A connection past that closes the one that has been
 //! sending its header longest (sockets left open on purpose are the
-//! oldest; a page's header takes milliseconds), so idle sockets cannot
-//! keep a page out. Pages once connected are capped by `MAX_CLIENTS` where
+//! oldest; a page's header takes milliseconds), unless that one is younger
+//! than 100 ms (a burst), when the newcomer is closed instead: idle
+//! sockets cannot keep a page out, and a burst cannot push one out. Pages once connected are capped by `MAX_CLIENTS` where
 //! the WebSocket is accepted.
 
 use axum::Router;
@@ -17,7 +18,7 @@ use std::collections::VecDeque;
 use std::future::Future;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use tokio::net::TcpListener;
 use tower::ServiceExt;
 
@@ -27,8 +28,13 @@ pub const MAX_PENDING: usize = 32;
 /// How long a connection may take to send its request header.
 pub const HEADER_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// A connection this young is not closed to make room (a page's header
+/// comes within milliseconds of its connection).
+const GRACE: Duration = Duration::from_millis(100);
+
 /// A connection still sending its request header.
 struct Pending {
+    since: Instant,
     /// Cleared when its first request's header is read.
     sending: Arc<AtomicBool>,
     task: tokio::task::AbortHandle,
@@ -52,9 +58,19 @@ pub async fn serve(listener: TcpListener, app: Router, stop: impl Future<Output 
             _ = &mut stop => return,
         };
         pending.retain(|p| p.sending.load(Ordering::Relaxed) && !p.task.is_finished());
-        while pending.len() >= MAX_PENDING {
-            if let Some(oldest) = pending.pop_front() {
-                oldest.task.abort();
+        if pending.len() >= MAX_PENDING {
+            // The oldest goes, unless it is younger than GRACE (a burst of
+            // connections): then the newest does, so a page that came
+            // just before a burst keeps its place.
+            match pending.front() {
+                Some(oldest) if oldest.since.elapsed() >= GRACE => {
+                    oldest.task.abort();
+                    pending.pop_front();
+                }
+                _ => {
+                    drop(stream);
+                    continue;
+                }
             }
         }
         // Frames go out as soon as they are written (a header and its
@@ -76,6 +92,7 @@ pub async fn serve(listener: TcpListener, app: Router, stop: impl Future<Output 
                 .await;
         });
         pending.push_back(Pending {
+            since: Instant::now(),
             sending,
             task: task.abort_handle(),
         });
