@@ -237,6 +237,21 @@ impl Client {
         v["message"].as_str().unwrap().to_string()
     }
 
+    /// Rotates a step (dy alternating with `i`) and waits for the frame
+    /// rendered from it.
+    async fn rotate_step(&mut self, i: usize) -> Frame {
+        let dy = if i.is_multiple_of(2) { 0.5 } else { -0.5 };
+        let want = self
+            .change(json!({"type": "rotate", "dx": 1.0, "dy": dy}))
+            .await;
+        loop {
+            let f = self.next_frame().await;
+            if f.version() >= want {
+                return f;
+            }
+        }
+    }
+
     /// Sends a change and returns the version it produced.
     async fn change(&mut self, v: Value) -> u64 {
         let before = self.version;
@@ -1210,16 +1225,7 @@ fn latency_of_input_to_frame() {
             let mut render = Vec::new();
             for i in 0..n {
                 let t = Instant::now();
-                let dy = if i.is_multiple_of(2) { 0.5 } else { -0.5 };
-                let want = c
-                    .change(json!({"type": "rotate", "dx": 1.0, "dy": dy}))
-                    .await;
-                let f = loop {
-                    let f = c.next_frame().await;
-                    if f.version() >= want {
-                        break f;
-                    }
-                };
+                let f = c.rotate_step(i).await;
                 lat.push(t.elapsed().as_secs_f64() * 1e3);
                 render.push(f.header["wall_ms"].as_f64().unwrap());
             }
@@ -1536,20 +1542,12 @@ struct Driven {
 /// again, for `secs`.
 async fn drive(c: &mut Client, secs: u64) -> Driven {
     let start = Instant::now();
-    let (mut latency, mut rss) = (Vec::new(), Vec::new());
+    let mut latency = Vec::new();
+    let (mut first, mut last) = (None, Vec::new());
     let mut i = 0usize;
     while start.elapsed() < Duration::from_secs(secs) {
         let t = Instant::now();
-        let dy = if i.is_multiple_of(2) { 0.5 } else { -0.5 };
-        let want = c
-            .change(json!({"type": "rotate", "dx": 1.0, "dy": dy}))
-            .await;
-        let f = loop {
-            let f = c.next_frame().await;
-            if f.version() >= want {
-                break f;
-            }
-        };
+        let f = c.rotate_step(i).await;
         latency.push(t.elapsed().as_secs_f64() * 1e3);
         let stats = f.header["stats"].as_array().unwrap();
         let mut row: Vec<u64> = stats
@@ -1557,11 +1555,8 @@ async fn drive(c: &mut Client, secs: u64) -> Driven {
             .map(|s| s["rss_bytes"].as_u64().unwrap())
             .collect();
         row.push(f.header["coordinator_rss_bytes"].as_u64().unwrap());
-        if rss.is_empty() {
-            rss.push(row.clone());
-        }
-        rss.truncate(1);
-        rss.push(row);
+        first.get_or_insert_with(|| row.clone());
+        last = row;
         i += 1;
     }
     let seconds = start.elapsed().as_secs_f64();
@@ -1571,7 +1566,7 @@ async fn drive(c: &mut Client, secs: u64) -> Driven {
         seconds,
         slowest_ms: *latency.last().unwrap(),
         median_ms: latency[latency.len() / 2],
-        rss: [rss[0].clone(), rss[rss.len() - 1].clone()],
+        rss: [first.unwrap_or_default(), last],
     }
 }
 

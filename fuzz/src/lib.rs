@@ -176,33 +176,31 @@ fn pxo(path: &Path) -> Result<()> {
 /// The first byte chooses the file: a transfer function, a display, one
 /// of its projectors, a scene or an interaction script.
 fn toml(dir: &Path, input: &[u8]) {
+    type Parse = fn(&Path) -> Result<()>;
+    // Each file, what it holds between inputs (the shared ones go back),
+    // and how it is read.
+    const FILES: [(&str, Option<&str>, Parse); 5] = [
+        ("tf.toml", Some(TF), |p| {
+            parallax_common::tf::TransferFunction::load(p).map(|_| ())
+        }),
+        ("display.toml", Some(DISPLAY), |p| {
+            Display::load(p).map(|_| ())
+        }),
+        ("p/left.toml", Some(PROJECTOR), |p| {
+            Display::load(&p.parent().unwrap().parent().unwrap().join("display.toml")).map(|_| ())
+        }),
+        ("scene.toml", Some(SCENE), |p| Scene::load(p).map(|_| ())),
+        ("script.toml", None, |p| {
+            parallax_frontend::script::Script::load(p).map(|_| ())
+        }),
+    ];
     let Some((&which, text)) = input.split_first() else {
         return;
     };
-    let (name, parse): (&str, fn(&Path) -> Result<()>) = match which % 5 {
-        0 => ("tf.toml", |p| {
-            parallax_common::tf::TransferFunction::load(p).map(|_| ())
-        }),
-        1 => ("display.toml", |p| Display::load(p).map(|_| ())),
-        2 => ("p/left.toml", |p| {
-            Display::load(&p.parent().unwrap().parent().unwrap().join("display.toml")).map(|_| ())
-        }),
-        3 => ("scene.toml", |p| Scene::load(p).map(|_| ())),
-        _ => ("script.toml", |p| {
-            parallax_frontend::script::Script::load(p).map(|_| ())
-        }),
-    };
+    let (name, original, parse) = FILES[which as usize % FILES.len()];
     let path = dir.join(name);
     std::fs::write(&path, text).unwrap();
     let r = parse(&path);
-    // The shared files go back for the next input.
-    let original = match which % 5 {
-        0 => Some(TF),
-        1 => Some(DISPLAY),
-        2 => Some(PROJECTOR),
-        3 => Some(SCENE),
-        _ => None,
-    };
     if let Some(t) = original {
         std::fs::write(&path, t).unwrap();
     }
