@@ -557,7 +557,7 @@ fn a_websocket_client_drives_the_desktop_view() {
         far_centre["placement"]["center"] = json!([0.0, 0.0, 11.0]);
         for (bad, want) in [
             (many, "state.tf: 5000 points (2 to 256)"),
-            (far_tool, "state.tools 0.point: 1000 is outside"),
+            (far_tool, "state.tools 0: point must be in [-10, 10] (got 1000)"),
             (far_centre, "state.placement.center: 11 is outside"),
         ] {
             a.send(json!({"type": "state", "state": bad})).await;
@@ -1096,6 +1096,12 @@ fn a_real_browser_drags_the_volume_round() {
                 assert!(start.elapsed() < WAIT, "the page never showed the probe's fields");
                 tokio::time::sleep(Duration::from_millis(100)).await;
             }
+            // Their labels are the probe's declaration's (hello.tool_info).
+            let labels_js = format!("(() => {{ const t = document.querySelectorAll('#tools .tool')[{n0}]; return Array.from(t.querySelectorAll('label')).map((l) => l.textContent).sort().join('|'); }})()");
+            assert_eq!(
+                cdp.eval(&labels_js).await,
+                json!("alignment|axis|center (m)|gradient|radius (m)")
+            );
             // Its ↑ button moves it to the chain's front; then it is removed
             // from there.
             cdp.eval(&format!("(() => {{ document.querySelectorAll('#tools .tool')[{n0}].querySelector('.movetool').click(); return ''; }})()")).await;

@@ -11,7 +11,6 @@ use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use parallax_common::camera::View;
 use parallax_common::overlay::{Overlay, Shape};
-use wgpu::util::DeviceExt;
 
 /// One vertex of `shaders/overlay.wgsl`.
 #[repr(C)]
@@ -129,6 +128,33 @@ pub struct OverlayRenderer {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
     target: Option<([u32; 3], wgpu::Texture)>,
+    /// The views, the vertices and the read-back, kept from frame to frame
+    /// (grown to the next power of two when a frame needs more).
+    views: Option<wgpu::Buffer>,
+    vertices: Option<wgpu::Buffer>,
+    staging: Option<wgpu::Buffer>,
+    /// Bound where a frame has no depths to combine with.
+    no_depth: wgpu::Buffer,
+}
+
+/// `slot`'s buffer, made anew (at the next power of two of `size`) only
+/// where it is missing or smaller than `size`.
+fn kept<'a>(
+    dev: &wgpu::Device,
+    slot: &'a mut Option<wgpu::Buffer>,
+    size: u64,
+    usage: wgpu::BufferUsages,
+    label: &'static str,
+) -> &'a wgpu::Buffer {
+    if slot.as_ref().is_none_or(|b| b.size() < size) {
+        *slot = Some(dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.next_power_of_two().max(256),
+            usage,
+            mapped_at_creation: false,
+        }));
+    }
+    slot.as_ref().expect("made above")
 }
 
 const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -192,10 +218,20 @@ impl OverlayRenderer {
                 cache: None,
             })
         })?;
+        let no_depth = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("overlay: no depth"),
+            size: 16,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
         Ok(OverlayRenderer {
             pipeline,
             layout,
             target: None,
+            views: None,
+            vertices: None,
+            staging: None,
+            no_depth,
         })
     }
 
@@ -262,22 +298,31 @@ impl OverlayRenderer {
                 }
             })
             .collect();
-        let view_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("overlay views"),
-            contents: bytemuck::cast_slice(&gv),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let vert_buf = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("overlay vertices"),
-            contents: bytemuck::cast_slice(&verts),
-            usage: wgpu::BufferUsages::VERTEX,
-        });
-        let none = dev.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("overlay: no depth"),
-            size: 16,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
+        let gv_bytes: &[u8] = bytemuck::cast_slice(&gv);
+        let vert_bytes: &[u8] = bytemuck::cast_slice(&verts);
+        let written = |slot: &'_ mut Option<wgpu::Buffer>, bytes: &[u8], usage, label| {
+            let b = kept(
+                dev,
+                slot,
+                bytes.len() as u64,
+                usage | wgpu::BufferUsages::COPY_DST,
+                label,
+            );
+            gpu.queue.write_buffer(b, 0, bytes);
+            b.clone()
+        };
+        let view_buf = written(
+            &mut self.views,
+            gv_bytes,
+            wgpu::BufferUsages::STORAGE,
+            "overlay views",
+        );
+        let vert_buf = written(
+            &mut self.vertices,
+            vert_bytes,
+            wgpu::BufferUsages::VERTEX,
+            "overlay vertices",
+        );
         let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("overlay"),
             layout: &self.layout,
@@ -288,19 +333,21 @@ impl OverlayRenderer {
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
-                    resource: depth.map_or(&none, |(b, _)| b).as_entire_binding(),
+                    resource: depth.map_or(&self.no_depth, |(b, _)| b).as_entire_binding(),
                 },
             ],
         });
         let row = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
             * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let layer_bytes = row as u64 * h as u64;
-        let staging = dev.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("overlay read-back"),
-            size: layer_bytes * views.len() as u64,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
+        let read_bytes = layer_bytes * views.len() as u64;
+        let staging = kept(
+            dev,
+            &mut self.staging,
+            read_bytes,
+            wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            "overlay read-back",
+        );
         let mut enc = dev.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("overlay"),
         });
@@ -331,7 +378,7 @@ impl OverlayRenderer {
                 pass.set_scissor_rect(0, 0, vw, vh);
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &bind, &[]);
-                pass.set_vertex_buffer(0, vert_buf.slice(..));
+                pass.set_vertex_buffer(0, vert_buf.slice(..vert_bytes.len() as u64));
                 pass.draw(0..verts.len() as u32, i as u32..i as u32 + 1);
             }
             enc.copy_texture_to_buffer(
@@ -346,7 +393,7 @@ impl OverlayRenderer {
                     aspect: wgpu::TextureAspect::All,
                 },
                 wgpu::TexelCopyBufferInfo {
-                    buffer: &staging,
+                    buffer: staging,
                     layout: wgpu::TexelCopyBufferLayout {
                         offset: layer_bytes * i as u64,
                         bytes_per_row: Some(row),
@@ -362,7 +409,7 @@ impl OverlayRenderer {
         }
         gpu.queue.submit([enc.finish()]);
         let out = {
-            let data = gpu.map_read(staging.slice(..), "the overlay layers")?;
+            let data = gpu.map_read(staging.slice(..read_bytes), "the overlay layers")?;
             views
                 .iter()
                 .enumerate()

@@ -358,17 +358,11 @@ impl Renderer {
         let values: Vec<f64> = self.tf.as_ref().map_or_else(Vec::new, |t| {
             t.function.points().iter().map(|p| p.value).collect()
         });
-        self.tools
-            .1
-            .iter()
-            .map(|t| match t {
-                Tool::BandPicker(b) => Tool::BandPicker(b.resolved(&values)),
-                t => t.clone(),
-            })
-            .collect()
+        self.tools.1.iter().map(|t| t.resolved(&values)).collect()
     }
 
-    /// The value windows [b₀, b₃] of the band pickers that act fully on
+    /// The value windows [b₀, b₃] of the tools that declare one (the band
+    /// picker) and act fully on
     /// every ray of this frame (G10 §4): where ω_a = 1 a segment whose
     /// values all miss a picker's band gets opacity × 0 (and importance 0),
     /// exactly nothing, so a node or a macrocell whose value range misses a
@@ -377,24 +371,23 @@ impl Renderer {
     /// tested on each view's corner and edge rays (every 1/32 of a side)
     /// with a margin of 10⁻⁴. DVR and MImDA without refraction only.
     fn band_windows(
-        &self,
-        placement: &Placement,
+        ctx: &PackContext,
+        tools: &[Tool],
         views: &[View],
         cfg: &RenderConfig,
     ) -> Vec<(f64, f64)> {
         if cfg.mode == Mode::Iso || cfg.refraction {
             return Vec::new();
         }
-        let ctx = self.pack_context(placement);
         let mut out = Vec::new();
-        for t in self.resolved_tools() {
-            let Tool::BandPicker(b) = t else {
+        for t in tools {
+            let Some(window) = t.value_window() else {
                 continue;
             };
-            if !t.acts_on(&ctx) {
+            if !t.acts_on(ctx) {
                 continue;
             }
-            let axis = glam::DVec3::from(b.axis).normalize();
+            let axis = window.axis;
             let aligned = views.iter().all(|v| {
                 let [w, h] = v.resolution;
                 let (sw, sh) = (w.div_ceil(32).max(1), h.div_ceil(32).max(1));
@@ -410,11 +403,11 @@ impl Renderer {
                     );
                 edge.into_iter().all(|(i, j)| {
                     let (_, d) = v.ray(i, j);
-                    -axis.dot(d) >= b.alignment[1] + 1e-4
+                    -axis.dot(d) >= window.cos_full + 1e-4
                 })
             });
             if aligned {
-                out.push((b.band[0], b.band[3]));
+                out.push((window.range[0], window.range[1]));
             }
         }
         out
@@ -430,18 +423,16 @@ impl Renderer {
     }
 
     /// The kernel and its parameters for this frame's scene state.
-    fn settings(&self, placement: &Placement, cfg: &RenderConfig) -> RenderSettings {
-        let ctx = self.pack_context(placement);
+    fn settings(&self, ctx: &PackContext, resolved: &[Tool], cfg: &RenderConfig) -> RenderSettings {
         // Tools that cannot change the volume's box are left out of the
         // kernel: a scene pays nothing for a tool moved away.
-        let resolved = self.resolved_tools();
-        let acting: Vec<&Tool> = resolved.iter().filter(|t| t.acts_on(&ctx)).collect();
+        let acting: Vec<&Tool> = resolved.iter().filter(|t| t.acts_on(ctx)).collect();
         let mut tools = [ToolParams::default(); MAX_ENHANCERS];
         for (p, t) in tools.iter_mut().zip(&acting) {
-            let [a, b, c, d] = t.pack(&ctx);
+            let [a, b, c, d] = t.pack(ctx);
             *p = ToolParams { a, b, c, d };
         }
-        let tool_regions = acting.iter().filter_map(|t| t.region(&ctx)).collect();
+        let tool_regions = acting.iter().filter_map(|t| t.region(ctx)).collect();
         RenderSettings {
             reconstruct: None,
             step_factor: cfg.step_factor as f32,
@@ -546,7 +537,11 @@ impl Renderer {
         }
         self.loader.set_accuracy(cfg.accuracy);
         let t = Instant::now();
-        let windows = self.band_windows(placement, views, cfg);
+        // The tools as this frame sees them, once: resolved against the
+        // transfer function and placed by `ctx`.
+        let ctx = self.pack_context(placement);
+        let tools = self.resolved_tools();
+        let windows = Self::band_windows(&ctx, &tools, views, cfg);
         if windows != self.cell_windows {
             self.cell_windows.clone_from(&windows);
             self.cells_stale = true;
@@ -571,7 +566,7 @@ impl Renderer {
         stats.index_ms = ms(t);
 
         let scene = self.geometry(placement);
-        let mut settings = self.settings(placement, cfg);
+        let mut settings = self.settings(&ctx, &tools, cfg);
         let continues = self.continue_history(frame, placement, views, cfg, &mut settings);
         let pb_next = self.plan_prediction(placement, views, cfg, &mut settings);
         let t = Instant::now();
@@ -624,9 +619,7 @@ impl Renderer {
             cfg.overlay.check("render", cfg.refraction)?;
             // Tool geometry over every view (G10 §5), in front of the
             // volume: drawn after reconstruction, so no history holds it.
-            let ctx = self.pack_context(placement);
-            let shapes =
-                parallax_common::overlay::shapes(&cfg.overlay, &self.resolved_tools(), &ctx);
+            let shapes = parallax_common::overlay::shapes(&cfg.overlay, &tools, &ctx);
             if !shapes.is_empty() {
                 if self.overlay.is_none() {
                     self.overlay = Some(crate::overlay::OverlayRenderer::new(&self.gpu)?);

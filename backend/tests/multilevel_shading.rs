@@ -211,7 +211,7 @@ fn the_unsharp_masked_gradient_matches_the_analytic_volume() {
                 strength: lambda,
                 level,
             }),
-            Tool::GradientDirection,
+            Tool::GradientDirection(Default::default()),
         ];
         let img = render(&db, &tf, &tools, &view, &cfg);
         let (mut sum, mut worst, mut count) = (0.0, 0f64, 0);

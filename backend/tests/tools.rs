@@ -724,7 +724,7 @@ fn refraction_follows_snells_law() {
         "ν = 1 with refraction on differs from no refraction"
     );
 
-    let exit = [Tool::ExitDirection];
+    let exit = [Tool::ExitDirection(Default::default())];
     let ext = [n as f64; 3];
     let centre = DVec3::splat(n as f64 / 2.0);
     for nu in [1.33, 0.6] {

@@ -70,7 +70,7 @@ fn combinations<'a>(
         ("dvr, no enhancer", vec![], cfg.clone(), tf),
         (
             "pass-through x3",
-            vec![Tool::PassThrough; 3],
+            vec![Tool::PassThrough(Default::default()); 3],
             cfg.clone(),
             tf,
         ),

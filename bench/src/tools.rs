@@ -12,7 +12,7 @@ use crate::kernels::bending;
 use crate::measure::{self, converged, timed_frame, write_table, Shot};
 use anyhow::{bail, Result};
 use parallax_common::config::{Mode, RenderConfig};
-use parallax_common::tf::TransferFunction;
+use parallax_common::tf::{ControlPoint, TransferFunction};
 use parallax_common::tools::{
     BandPicker, ClipPlane, ExaggeratedShading, Probe, Tool, UnsharpGradient,
 };
@@ -95,12 +95,70 @@ fn multilevel_shading(strength: f64) -> Vec<Tool> {
     ]
 }
 
+/// Which transfer function a combination renders with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Tf {
+    /// The scene's.
+    Scene,
+    /// The scene's with refraction indices that bend rays.
+    Bent,
+    /// The scene's with its extinction times the band picker's trapezoid:
+    /// what the band picker shows looking along its axis.
+    Band,
+}
+
+/// The scene's transfer function with its extinction multiplied by the
+/// band picker's trapezoid (zero outside [b₀, b₃]; the ramps sampled at 16
+/// points each).
+fn band_tf(tf: &TransferFunction, band: [f64; 4]) -> Result<TransferFunction> {
+    let trapezoid = |v: f64| {
+        if v <= band[0] || v >= band[3] {
+            0.0
+        } else if v < band[1] {
+            (v - band[0]) / (band[1] - band[0])
+        } else if v <= band[2] {
+            1.0
+        } else {
+            (band[3] - v) / (band[3] - band[2])
+        }
+    };
+    let p = tf.points();
+    let mut values: Vec<f64> = vec![p[0].value, p[p.len() - 1].value];
+    values.extend(
+        p.iter()
+            .map(|q| q.value)
+            .filter(|v| *v > band[0] && *v < band[3]),
+    );
+    for k in 0..=16 {
+        let t = k as f64 / 16.0;
+        values.push(band[0] + t * (band[1] - band[0]));
+        values.push(band[2] + t * (band[3] - band[2]));
+    }
+    values.sort_by(f64::total_cmp);
+    values.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    TransferFunction::from_points(
+        values
+            .into_iter()
+            .map(|v| {
+                let o = tf.eval(v);
+                ControlPoint {
+                    value: v,
+                    color: o.color,
+                    extinction: o.tau * trapezoid(v),
+                    importance: o.importance,
+                    refraction: o.refraction,
+                }
+            })
+            .collect(),
+    )
+}
+
 /// The combinations: their names, tools, settings, whether they must equal
-/// the base image, and whether they bend rays. No tool comes first.
+/// the base image, and their transfer function. No tool comes first.
 fn combinations(
     cfg: &RenderConfig,
     tf: &TransferFunction,
-) -> Vec<(&'static str, Vec<Tool>, RenderConfig, bool, bool)> {
+) -> Vec<(&'static str, Vec<Tool>, RenderConfig, bool, Tf)> {
     let with = |mode, gamma, refraction| RenderConfig {
         mode,
         gamma,
@@ -111,91 +169,101 @@ fn combinations(
     // In the air above the head's right side, within the view.
     let probe_away = Tool::Probe(Probe::new([0.12, 0.1, 0.0], 0.025));
     vec![
-        ("no tool", vec![], cfg.clone(), true, false),
+        ("no tool", vec![], cfg.clone(), true, Tf::Scene),
         (
             "clip plane, 5 m away",
             vec![plane_away()],
             cfg.clone(),
             true,
-            false,
+            Tf::Scene,
         ),
         (
             "clip plane, facing away",
             vec![plane_facing_away()],
             cfg.clone(),
             true,
-            false,
+            Tf::Scene,
         ),
         (
             "probe, in the air",
             vec![probe_away],
             cfg.clone(),
             true,
-            false,
+            Tf::Scene,
         ),
         (
             "pass-through x3",
-            vec![Tool::PassThrough; 3],
+            vec![Tool::PassThrough(Default::default()); 3],
             cfg.clone(),
             true,
-            false,
+            Tf::Scene,
         ),
         (
             "multilevel shading, strength 0",
             multilevel_shading(0.0),
             cfg.clone(),
             true,
-            false,
+            Tf::Scene,
         ),
         (
             "MImDA gamma 0",
             vec![],
             with(Mode::Mimda, 0.0, false),
             true,
-            false,
+            Tf::Scene,
         ),
         (
             "refraction, nu = 1",
             vec![],
             with(Mode::Dvr, 0.0, true),
             true,
-            false,
+            Tf::Scene,
         ),
         (
             "clip plane in place",
             vec![plane_in_place()],
             cfg.clone(),
             false,
-            false,
+            Tf::Scene,
         ),
-        ("probe in place", vec![probe], cfg.clone(), false, false),
+        ("probe in place", vec![probe], cfg.clone(), false, Tf::Scene),
         (
             "band picker",
             vec![band_picker(tf)],
             cfg.clone(),
             false,
+            Tf::Scene,
+        ),
+        // What the band picker shows along its axis, as a transfer
+        // function of its own with no tool: the samples its effect asks
+        // for, at no tool's price.
+        (
+            "band's own tf, no tool",
+            vec![],
+            cfg.clone(),
             false,
+            Tf::Band,
         ),
         (
             "multilevel shading",
             multilevel_shading(1.0),
             cfg.clone(),
             false,
-            false,
+            Tf::Scene,
         ),
         (
             "MImDA gamma 0.5",
             vec![],
             with(Mode::Mimda, 0.5, false),
             false,
-            false,
+            Tf::Scene,
         ),
         (
             "refraction, nu 1..1.1",
             vec![],
             with(Mode::Dvr, 0.0, true),
             false,
-            true,
+            Tf::Bent,
         ),
     ]
 }
@@ -204,11 +272,20 @@ fn combinations(
 /// `cfg`, `rounds` timed rounds.
 pub fn run(shot: Shot, tf_name: &str, cfg: &RenderConfig, rounds: usize) -> Result<Vec<ToolPoint>> {
     let bent = bending(shot.tf)?;
+    let Tool::BandPicker(picker) = band_picker(shot.tf) else {
+        unreachable!("a band picker")
+    };
+    let banded = band_tf(shot.tf, picker.band)?;
     let combos = combinations(cfg, shot.tf);
+    let tf_of = |t: Tf| match t {
+        Tf::Scene => shot.tf,
+        Tf::Bent => &bent,
+        Tf::Band => &banded,
+    };
     let mut renderers = Vec::new();
     let mut images = Vec::new();
-    for (_, tools, c, _, bends) in &combos {
-        let tf = if *bends { &bent } else { shot.tf };
+    for (_, tools, c, _, t) in &combos {
+        let tf = tf_of(*t);
         let (r, f) = converged(Shot { tf, ..shot }, c, tools, measure::CONVERGE_FRAMES)?;
         images.push(f.images.into_iter().next().unwrap());
         renderers.push(r);
@@ -217,8 +294,8 @@ pub fn run(shot: Shot, tf_name: &str, cfg: &RenderConfig, rounds: usize) -> Resu
     let mut ms = vec![Vec::new(); combos.len()];
     for round in 0..rounds {
         for i in measure::round_order(round, combos.len()) {
-            let (_, _, c, _, bends) = &combos[i];
-            let tf = if *bends { &bent } else { shot.tf };
+            let (_, _, c, _, t) = &combos[i];
+            let tf = tf_of(*t);
             let (f, _) = timed_frame(
                 &mut renderers[i],
                 200 + round as u64,
@@ -229,8 +306,8 @@ pub fn run(shot: Shot, tf_name: &str, cfg: &RenderConfig, rounds: usize) -> Resu
         }
     }
     let mut out: Vec<ToolPoint> = Vec::new();
-    for (i, (name, _, c, neutral, bends)) in combos.iter().enumerate() {
-        let tf = if *bends { &bent } else { shot.tf };
+    for (i, (name, _, c, neutral, t)) in combos.iter().enumerate() {
+        let tf = tf_of(*t);
         renderers[i].count_samples = true;
         let (f, _) = timed_frame(&mut renderers[i], 1000, Shot { tf, ..shot }, c)?;
         let render_ms = measure::median(&mut ms[i]);

@@ -196,13 +196,13 @@ pub enum Shape {
 /// straight edge is drawn as a polyline too.
 pub const SEGMENTS: usize = 32;
 
-fn subdivided(a: DVec3, b: DVec3) -> Vec<DVec3> {
+pub(crate) fn subdivided(a: DVec3, b: DVec3) -> Vec<DVec3> {
     (0..=SEGMENTS)
         .map(|i| a.lerp(b, i as f64 / SEGMENTS as f64))
         .collect()
 }
 
-fn circle(c: DVec3, r: f64, u: DVec3, v: DVec3) -> Vec<DVec3> {
+pub(crate) fn circle(c: DVec3, r: f64, u: DVec3, v: DVec3) -> Vec<DVec3> {
     let n = 2 * SEGMENTS;
     (0..=n)
         .map(|i| {
@@ -235,51 +235,12 @@ pub fn shapes(overlay: &Overlay, tools: &[Tool], ctx: &PackContext) -> Vec<Shape
         }
         label(&mut out, c, "cursor".into());
     }
-    let p = &ctx.placement;
-    let ext = DVec3::from(ctx.extent);
     for tool in tools {
-        match tool {
-            Tool::ClipPlane(plane) => {
-                let poly = plane_in_box(plane, ctx);
-                if poly.len() >= 3 {
-                    let mut closed: Vec<DVec3> = Vec::new();
-                    for i in 0..poly.len() {
-                        let seg = subdivided(poly[i], poly[(i + 1) % poly.len()]);
-                        closed.extend(if i == 0 { &seg[..] } else { &seg[1..] });
-                    }
-                    // Its top left corner (the label reads rightwards).
-                    let top_y = poly.iter().map(|q| q.y).fold(f64::MIN, f64::max);
-                    let top = poly
-                        .iter()
-                        .copied()
-                        .filter(|q| q.y >= top_y - 1e-9)
-                        .fold(DVec3::splat(f64::MAX), |m, q| if q.x < m.x { q } else { m });
-                    out.push(Shape::Polyline(closed));
-                    label(&mut out, top, "clip plane".into());
-                }
-            }
-            Tool::Probe(probe) => {
-                let c = DVec3::from(probe.center);
-                let r = probe.radius;
-                out.push(Shape::Polyline(circle(c, r, DVec3::X, DVec3::Y)));
-                out.push(Shape::Polyline(circle(c, r, DVec3::Y, DVec3::Z)));
-                out.push(Shape::Polyline(circle(c, r, DVec3::Z, DVec3::X)));
-                label(&mut out, c + DVec3::Y * r, "probe".into());
-            }
-            Tool::BandPicker(b) => {
-                let axis = DVec3::from(b.axis).normalize();
-                let centre = DVec3::from(p.center);
-                let half = 0.5 * p.scale(ctx.extent) * ext.max_element();
-                let end = centre + axis * half;
-                out.push(Shape::Polyline(subdivided(centre - axis * half, end)));
-                label(
-                    &mut out,
-                    end,
-                    format!("band {:.4}-{:.4}", b.band[1], b.band[2]),
-                );
-            }
-            _ => {}
-        }
+        out.extend(
+            tool.shapes(ctx)
+                .into_iter()
+                .filter(|s| overlay.labels || !matches!(s, Shape::Label(..))),
+        );
     }
     out
 }

@@ -16,7 +16,8 @@
 //! ```
 //!
 //! A key may also move the scene's tools and change their parameters (each
-//! `[[key.tool]]` names the scene's tool by its index), and set MImDA's γ:
+//! `[[key.tool]]` names the scene's tool by its index and keys any numeric
+//! field of its table by name, as the scene writes it), and set MImDA's γ:
 //!
 //! ```toml
 //! [[key]]
@@ -115,55 +116,77 @@ pub struct Key {
 #[serde(transparent)]
 pub struct ToolSet(#[serde(with = "parallax_common::tools::list")] pub Vec<Tool>);
 
+/// A tool's keyed fields at one key: any numeric field of its table, by
+/// name (a clip plane's `point`, a probe's `center` and `radius`, a band
+/// picker's `band` …), a number or a list of numbers.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct ToolKey {
     pub index: usize,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub point: Option<[f64; 3]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub normal: Option<[f64; 3]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub thickness: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub context: Option<[f64; 2]>,
-    /// A probe's radius (m); its centre is keyed as `point`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub radius: Option<f64>,
-    /// A probe's axis.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub axis: Option<[f64; 3]>,
+    #[serde(flatten)]
+    pub fields: std::collections::BTreeMap<String, Numbers>,
 }
 
-/// The keyframed pose and parameters of one tool.
-#[derive(Clone, Debug, Default)]
-struct ToolTracks {
-    point: Track<3>,
-    normal: Track<3>,
-    thickness: Track<1>,
-    context: Track<2>,
-    radius: Track<1>,
-    axis: Track<3>,
+/// A keyed field's value.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Numbers {
+    One(f64),
+    Many(Vec<f64>),
 }
+
+impl Numbers {
+    fn values(&self) -> Vec<f64> {
+        match self {
+            Numbers::One(x) => vec![*x],
+            Numbers::Many(v) => v.clone(),
+        }
+    }
+}
+
+/// The keyframed fields of one tool, by name.
+type ToolTracks = std::collections::BTreeMap<String, Track<Vec<f64>>>;
 
 /// One numeric track: (frame, value) keys in frame order.
 #[derive(Clone, Debug, Default)]
-struct Track<const N: usize> {
-    keys: Vec<(u64, [f64; N])>,
+struct Track<V> {
+    keys: Vec<(u64, V)>,
 }
 
-impl<const N: usize> Track<N> {
-    fn at(&self, frame: u64, default: [f64; N]) -> [f64; N] {
+/// A value a track interpolates.
+trait Lerp: Clone {
+    fn lerp(a: &Self, b: &Self, t: f64) -> Self;
+}
+
+impl<const N: usize> Lerp for [f64; N] {
+    fn lerp(a: &Self, b: &Self, t: f64) -> Self {
+        std::array::from_fn(|c| a[c] + t * (b[c] - a[c]))
+    }
+}
+
+impl Lerp for Vec<f64> {
+    fn lerp(a: &Self, b: &Self, t: f64) -> Self {
+        a.iter().zip(b).map(|(x, y)| x + t * (y - x)).collect()
+    }
+}
+
+impl<V: Lerp> Track<V> {
+    fn at(&self, frame: u64, default: V) -> V {
+        self.get(frame).unwrap_or(default)
+    }
+
+    /// The value at `frame`: interpolated between the keys around it, the
+    /// first before it, the last after it; None without keys.
+    fn get(&self, frame: u64) -> Option<V> {
         let k = &self.keys;
-        match k.iter().position(|&(f, _)| f > frame) {
-            None => k.last().map_or(default, |&(_, v)| v),
-            Some(0) => k[0].1,
+        Some(match k.iter().position(|(f, _)| *f > frame) {
+            None => k.last()?.1.clone(),
+            Some(0) => k[0].1.clone(),
             Some(i) => {
-                let ((f0, a), (f1, b)) = (k[i - 1], k[i]);
+                let ((f0, a), (f1, b)) = (&k[i - 1], &k[i]);
                 let t = (frame - f0) as f64 / (f1 - f0) as f64;
-                std::array::from_fn(|c| a[c] + t * (b[c] - a[c]))
+                V::lerp(a, b, t)
             }
-        }
+        })
     }
 }
 
@@ -171,15 +194,15 @@ impl<const N: usize> Track<N> {
 #[derive(Clone, Debug)]
 pub struct Script {
     pub frames: u64,
-    center: Track<3>,
-    rotation: Track<3>,
-    size: Track<1>,
-    observer: Track<3>,
-    eta: Track<1>,
-    gamma: Track<1>,
-    accuracy: Track<1>,
-    step_factor: Track<1>,
-    cursor: Track<3>,
+    center: Track<[f64; 3]>,
+    rotation: Track<[f64; 3]>,
+    size: Track<[f64; 1]>,
+    observer: Track<[f64; 3]>,
+    eta: Track<[f64; 1]>,
+    gamma: Track<[f64; 1]>,
+    accuracy: Track<[f64; 1]>,
+    step_factor: Track<[f64; 1]>,
+    cursor: Track<[f64; 3]>,
     /// (first frame, on) of each overlay switch.
     overlay: Vec<(u64, bool)>,
     /// (first frame, file) of each transfer function switch.
@@ -305,40 +328,25 @@ impl Script {
                 if s.tools.len() <= t.index {
                     s.tools.resize(t.index + 1, ToolTracks::default());
                 }
-                let tr = &mut s.tools[t.index];
-                if let Some(p) = t.point {
-                    finite("point", &p)?;
-                    tr.point.keys.push((k.frame, p));
-                }
-                if let Some(n) = t.normal {
-                    finite("normal", &n)?;
-                    if n.iter().map(|x| x * x).sum::<f64>() < 1e-24 {
-                        bail!("{at}: normal must be non-zero");
+                for (field, value) in &t.fields {
+                    let v = value.values();
+                    if field == "kind" || v.is_empty() || v.len() > 4 {
+                        bail!("{at}: {field}: a key sets a numeric field of the tool (a number or up to four)");
                     }
-                    tr.normal.keys.push((k.frame, n));
-                }
-                if let Some(th) = t.thickness {
-                    if !(th.is_finite() && th >= 0.0) {
-                        bail!("{at}: thickness must be ≥ 0 (got {th})");
+                    if !v.iter().all(|x| x.is_finite()) {
+                        bail!("{at}: {field} must be finite (got {v:?})");
                     }
-                    tr.thickness.keys.push((k.frame, [th]));
-                }
-                if let Some(c) = t.context {
-                    finite("context", &c)?;
-                    tr.context.keys.push((k.frame, c));
-                }
-                if let Some(r) = t.radius {
-                    if !(r.is_finite() && r > 0.0) {
-                        bail!("{at}: radius must be > 0 (got {r})");
+                    let track = s.tools[t.index].entry(field.clone()).or_default();
+                    if let Some((_, first)) = track.keys.first() {
+                        if first.len() != v.len() {
+                            bail!(
+                                "{at}: {field}: {} value(s), its earlier keys have {}",
+                                v.len(),
+                                first.len()
+                            );
+                        }
                     }
-                    tr.radius.keys.push((k.frame, [r]));
-                }
-                if let Some(a) = t.axis {
-                    finite("axis", &a)?;
-                    if a.iter().map(|x| x * x).sum::<f64>() < 1e-24 {
-                        bail!("{at}: axis must be non-zero");
-                    }
-                    tr.axis.keys.push((k.frame, a));
+                    track.keys.push((k.frame, v));
                 }
             }
             if let Some(t) = &k.transfer_function {
@@ -407,37 +415,41 @@ impl Script {
         }
         let mut out = scene.to_vec();
         for (i, (t, tr)) in out.iter_mut().zip(&self.tools).enumerate() {
-            let plane_keys = !(tr.normal.keys.is_empty()
-                && tr.thickness.keys.is_empty()
-                && tr.context.keys.is_empty());
-            let probe_keys = !(tr.radius.keys.is_empty() && tr.axis.keys.is_empty());
-            match t {
-                Tool::ClipPlane(c) if !probe_keys => {
-                    c.point = tr.point.at(frame, c.point);
-                    c.normal = tr.normal.at(frame, c.normal);
-                    c.thickness = tr.thickness.at(frame, [c.thickness])[0];
-                    c.context = tr.context.at(frame, c.context);
-                }
-                Tool::Probe(p) if !plane_keys => {
-                    p.center = tr.point.at(frame, p.center);
-                    p.radius = tr.radius.at(frame, [p.radius])[0];
-                    p.axis = tr.axis.at(frame, p.axis);
-                }
-                Tool::BandPicker(b)
-                    if !plane_keys && tr.point.keys.is_empty() && tr.radius.keys.is_empty() =>
-                {
-                    b.axis = tr.axis.at(frame, b.axis);
-                }
-                _ => {
-                    if plane_keys || probe_keys || !tr.point.keys.is_empty() {
-                        bail!(
-                            "{}: tool {i}: keys this kind of tool does not have (a clip plane: point, normal, thickness, context; a probe: point, radius, axis; a band picker: axis)",
-                            self.name
-                        );
-                    }
-                }
+            if tr.is_empty() {
+                continue;
             }
-            t.check(&format!("{}: tool {i} at frame {frame}", self.name))?;
+            let kind = t.enhancer().file();
+            let what = format!("{}: tool {i} ({kind}) at frame {frame}", self.name);
+            let mut table = t.table()?;
+            for (field, track) in tr {
+                let Some(v) = track.get(frame) else { continue };
+                let slot = table.get_mut(field).filter(|old| {
+                    old.as_array().map_or(v.len() == 1 && old.is_number(), |a| {
+                        a.len() == v.len() && a.iter().all(|x| x.is_number())
+                    })
+                });
+                let Some(slot) = slot else {
+                    bail!(
+                        "{what}: {field}: a {kind} has no field of {} number(s) by that name (its numeric fields: {})",
+                        v.len(),
+                        t.numeric_fields().join(", ")
+                    );
+                };
+                // Integer fields (a level) keep integers where the value is one.
+                let number = |x: f64, old: &serde_json::Value| {
+                    if (old.is_i64() || old.is_u64()) && x.fract() == 0.0 && x.abs() < 1e15 {
+                        serde_json::json!(x as i64)
+                    } else {
+                        serde_json::json!(x)
+                    }
+                };
+                *slot = match slot.as_array() {
+                    None => number(v[0], slot),
+                    Some(a) => a.iter().zip(&v).map(|(o, &x)| number(x, o)).collect(),
+                };
+            }
+            *t = Tool::from_table(table.into(), &what)?;
+            t.check(&what)?;
         }
         Ok(out)
     }
@@ -522,8 +534,12 @@ mod tests {
             ("[[key]]\nframe = 0\nspin = 1\n", "spin"),
             ("[[key]]\nframe = 0\ngamma = 2\n", "gamma"),
             (
-                "[[key]]\nframe = 0\ntool = [{ index = 0, normal = [0, 0, 0] }]\n",
+                "[[key]]\nframe = 0\ntool = [{ index = 0, normal = [0, nan, 0] }]\n",
                 "normal",
+            ),
+            (
+                "[[key]]\nframe = 0\ntool = [{ index = 0, normal = [0, 1] }]\n[[key]]\nframe = 1\ntool = [{ index = 0, normal = [0, 0, 1] }]\n",
+                "normal: 3 value(s)",
             ),
         ] {
             let e = format!("{:#}", load(text).unwrap_err());
@@ -566,6 +582,48 @@ mod tool_tests {
     }
 
     #[test]
+    fn any_numeric_field_of_any_kind_is_keyed_by_name() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("s.toml");
+        std::fs::write(
+            &p,
+            "[[key]]\nframe = 0\ntool = [{ index = 0, band = [10, 20, 30, 40] }, { index = 1, strength = 0, level = 2 }]\n\
+             [[key]]\nframe = 4\ntool = [{ index = 0, band = [50, 60, 70, 80], alignment = [0.5, 0.9] }, { index = 1, strength = 2 }]\n",
+        )
+        .unwrap();
+        let s = Script::load(&p).unwrap();
+        #[derive(Deserialize)]
+        struct W {
+            t: ToolSet,
+        }
+        let w: W = toml::from_str(
+            "t = [{ kind = \"band-picker\", band = [0, 1, 2, 3] }, { kind = \"unsharp-gradient\" }]",
+        )
+        .unwrap();
+        let scene = w.t.0;
+        let t = s.tools(1, &scene).unwrap();
+        let Tool::BandPicker(b) = t[0] else { panic!() };
+        assert_eq!(b.band, [20.0, 30.0, 40.0, 50.0]);
+        assert_eq!(b.alignment, [0.5, 0.9]);
+        let Tool::UnsharpGradient(u) = t[1] else {
+            panic!()
+        };
+        assert_eq!((u.strength, u.level), (0.5, 2));
+        // A field of another length than the tool's is refused by name.
+        std::fs::write(
+            &p,
+            "[[key]]\nframe = 0\ntool = [{ index = 1, strength = [1, 2] }]\n",
+        )
+        .unwrap();
+        let e = Script::load(&p).unwrap().tools(0, &scene).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("tool 1 (unsharp-gradient) at frame 0: strength"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn a_tool_set_replaces_the_scene_tools_from_its_frame() {
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("s.toml");
@@ -575,7 +633,7 @@ mod tool_tests {
         )
         .unwrap();
         let s = Script::load(&p).unwrap();
-        let scene = vec![Tool::PassThrough];
+        let scene = vec![Tool::PassThrough(Default::default())];
         assert_eq!(s.tools(3, &scene).unwrap(), scene);
         let t = s.tools(4, &scene).unwrap();
         assert_eq!(t.len(), 2);
@@ -590,13 +648,13 @@ mod tool_tests {
     }
 
     #[test]
-    fn a_probe_is_keyframed_and_plane_keys_on_it_are_refused() {
+    fn a_probe_is_keyframed_and_keys_it_lacks_are_refused() {
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("s.toml");
         std::fs::write(
             &p,
-            "[[key]]\nframe = 0\ntool = [{ index = 0, point = [0, 0, 0], radius = 0.02 }]\n\
-             [[key]]\nframe = 10\ntool = [{ index = 0, point = [0.1, 0, 0], radius = 0.04, axis = [1, 0, 0] }]\n",
+            "[[key]]\nframe = 0\ntool = [{ index = 0, center = [0, 0, 0], radius = 0.02 }]\n\
+             [[key]]\nframe = 10\ntool = [{ index = 0, center = [0.1, 0, 0], radius = 0.04, axis = [1, 0, 0] }]\n",
         )
         .unwrap();
         let s = Script::load(&p).unwrap();
@@ -619,7 +677,9 @@ mod tool_tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("s.toml: tool 0") && e.contains("probe: point, radius, axis"),
+            e.contains("s.toml: tool 0 (probe)")
+                && e.contains("normal")
+                && e.contains("center, gradient, radius"),
             "{e}"
         );
     }

@@ -211,7 +211,7 @@ impl KernelKey {
     /// Refraction bends rays in empty space too, and the isosurface stepper
     /// looks for its value, not for extinction.
     pub fn skips_empty_space(&self) -> bool {
-        !self.refraction && !self.iso && self.specs().all(|s| !s.adds_opacity)
+        !self.refraction && !self.iso && self.specs().all(|s| !s.needs.adds_opacity)
     }
 
     /// The `chain` module of this combination.
@@ -248,8 +248,12 @@ impl KernelKey {
         });
         s.push_str("#import iso\n");
         let _ = writeln!(s, "const ISO: bool = {};", self.iso);
-        let _ = writeln!(s, "const HAS_BREAKS: bool = {};", any(|e| e.breaks));
-        let _ = writeln!(s, "const MODIFIES_OPTICS: bool = {};", any(|e| e.optics));
+        let _ = writeln!(s, "const HAS_BREAKS: bool = {};", any(|e| e.needs.breaks));
+        let _ = writeln!(
+            s,
+            "const MODIFIES_OPTICS: bool = {};",
+            any(|e| e.needs.optics)
+        );
         let _ = writeln!(
             s,
             "const NEEDS_AUX: bool = {};",
@@ -259,18 +263,22 @@ impl KernelKey {
         // The gradient costs six samples and the importance a table read:
         // computed before the enhancers only where one that reads them is
         // active (shading computes its own gradient otherwise).
-        let _ = writeln!(s, "const NEEDS_GRADIENT: bool = {};", any(|e| e.gradient));
-        let _ = writeln!(s, "const TOOL_AUX: bool = {};", any(|e| e.importance));
+        let _ = writeln!(
+            s,
+            "const NEEDS_GRADIENT: bool = {};",
+            any(|e| e.needs.gradient)
+        );
+        let _ = writeln!(s, "const TOOL_AUX: bool = {};", any(|e| e.needs.importance));
         let _ = writeln!(
             s,
             "const COARSE_GRADIENTS: bool = {};",
-            any(|e| e.coarse_gradients)
+            any(|e| e.needs.coarse_gradients)
         );
-        let _ = writeln!(s, "const TOOL_SHADES: bool = {};", any(|e| e.shades));
+        let _ = writeln!(s, "const TOOL_SHADES: bool = {};", any(|e| e.needs.shades));
         let _ = writeln!(
             s,
             "const TOOL_IMPORTANCE: bool = {};",
-            any(|e| e.sets_importance)
+            any(|e| e.needs.sets_importance)
         );
         for (i, &k) in self.enhancers.iter().enumerate() {
             let text = enhancer_source(k)
@@ -286,7 +294,7 @@ impl KernelKey {
         let active: Vec<String> = self
             .specs()
             .enumerate()
-            .filter(|(_, e)| e.gradient || e.importance || e.coarse_gradients)
+            .filter(|(_, e)| e.needs.gradient || e.needs.importance || e.needs.coarse_gradients)
             .map(|(i, _)| format!("enh{i}_active(smp)"))
             .collect();
         let _ = writeln!(

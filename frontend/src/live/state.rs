@@ -160,59 +160,6 @@ fn within3(name: &str, v: [f64; 3], lo: f64, hi: f64) -> Result<[f64; 3]> {
     Ok(v)
 }
 
-/// The bounds a tool's pose keeps, whichever message sets it.
-fn tool_bounds(tool: &Tool, what: &str) -> Result<()> {
-    let place = |name: &str, p: [f64; 3]| {
-        within3(&format!("{what}.{name}"), p, -CENTER_LIMIT, CENTER_LIMIT)
-    };
-    match tool {
-        Tool::ClipPlane(c) => {
-            place("point", c.point)?;
-            within3(&format!("{what}.normal"), c.normal, -1e3, 1e3)?;
-            within(&format!("{what}.thickness"), c.thickness, 0.0, 10.0)?;
-        }
-        Tool::Probe(p) => {
-            place("center", p.center)?;
-            within3(&format!("{what}.axis"), p.axis, -1e3, 1e3)?;
-        }
-        Tool::BandPicker(b) => {
-            within3(&format!("{what}.axis"), b.axis, -1e3, 1e3)?;
-            for x in b.band {
-                within(&format!("{what}.band"), x, -1e12, 1e12)?;
-            }
-        }
-        Tool::ExaggeratedShading(e) => {
-            within3(&format!("{what}.light"), e.light, -1e3, 1e3)?;
-        }
-        // Kinds without a pose or values of their own: `check` bounds them.
-        _ => {}
-    }
-    Ok(())
-}
-
-/// One tool to and from its `[[tool]]` table (JSON).
-#[derive(Serialize, Deserialize)]
-struct ToolList {
-    #[serde(with = "parallax_common::tools::list")]
-    tool: Vec<Tool>,
-}
-
-fn tool_table(tool: &Tool) -> Result<serde_json::Map<String, serde_json::Value>> {
-    let v = serde_json::to_value(ToolList {
-        tool: vec![tool.clone()],
-    })?;
-    match &v["tool"][0] {
-        serde_json::Value::Object(m) => Ok(m.clone()),
-        _ => bail!("a tool is not a table"),
-    }
-}
-
-fn tool_from_table(table: serde_json::Value, what: &str) -> Result<Tool> {
-    let list: ToolList = serde_json::from_value(serde_json::json!({ "tool": [table] }))
-        .with_context(|| what.to_string())?;
-    Ok(list.tool.into_iter().next().expect("one tool"))
-}
-
 /// The outputs a display offers: the desktop window, or each projector and
 /// the simulated eye view of a light field display.
 pub fn outputs(display: &Display) -> Vec<String> {
@@ -243,6 +190,11 @@ pub fn hello(
         "value_range": range,
         "tool_kinds": scene.tools.iter().map(|t| t.enhancer().file()).collect::<Vec<_>>(),
         "all_tool_kinds": EnhancerKind::ALL.iter().map(|k| k.file()).collect::<Vec<_>>(),
+        // Each kind's field hints and what "add" adds (tools are data).
+        "tool_info": EnhancerKind::ALL
+            .iter()
+            .map(|k| (k.file().to_string(), k.page_info(range)))
+            .collect::<serde_json::Map<_, _>>(),
         "eye_range": [-w, w],
         "record_dir": record_dir.display().to_string(),
     })
@@ -324,8 +276,8 @@ impl LiveState {
                     self.tools.len() < MAX_ENHANCERS,
                     "add-tool: the chain holds {MAX_ENHANCERS} tools at most"
                 );
-                let t = tool_from_table(tool, "add-tool.tool")?;
-                tool_bounds(&t, "add-tool.tool")?;
+                let t = Tool::from_table(tool, "add-tool.tool")?;
+                t.bounds("add-tool.tool")?;
                 t.check("add-tool.tool")?;
                 self.tools.push(t);
             }
@@ -410,11 +362,11 @@ impl LiveState {
             !edit.fields.contains_key("kind"),
             "tool.kind: a tool's kind does not change; remove it and add another"
         );
-        let mut table = tool_table(tool)?;
+        let mut table = tool.table()?;
         table.extend(edit.fields.clone());
         let kind = tool.enhancer().file();
-        let edited = tool_from_table(table.into(), &format!("tool {index} ({kind})"))?;
-        tool_bounds(&edited, "tool")?;
+        let edited = Tool::from_table(table.into(), &format!("tool {index} ({kind})"))?;
+        edited.bounds("tool")?;
         edited.check(&format!("tool {index}"))?;
         *tool = edited;
         Ok(())
@@ -445,7 +397,7 @@ impl LiveState {
                     points: None,
                     ..*b
                 });
-                tool_bounds(&next, "grow-band")?;
+                next.bounds("grow-band")?;
                 next.check("grow-band")?;
                 self.tools[index] = next;
                 Ok(())
@@ -495,7 +447,7 @@ impl LiveState {
             s.tools.len()
         );
         for (i, t) in s.tools.iter().enumerate() {
-            tool_bounds(t, &format!("state.tools {i}"))?;
+            t.bounds(&format!("state.tools {i}"))?;
             t.check(&format!("state.tools {i}"))?;
         }
         next.tools = s.tools;
