@@ -6,7 +6,6 @@
 mod support;
 
 use glam::DVec3;
-use parallax_backend::render::Renderer;
 use parallax_backend::store::BrickEncoding;
 use parallax_backend::volume::{Volume, VoxelType};
 use parallax_common::camera::{Placement, View};
@@ -15,7 +14,7 @@ use parallax_common::tf::{ControlPoint, TransferFunction};
 use parallax_common::tools::{ExaggeratedShading, Tool, UnsharpGradient};
 use std::f64::consts::PI;
 use std::path::Path;
-use support::{assert_valid, exact_config, import_volume, translucent};
+use support::{exact_config, import_volume, translucent};
 
 const N: usize = 32;
 /// s = S0 + A·sin(k·x) + B·y, constant along z (voxel units, spacing 1).
@@ -27,6 +26,7 @@ const B: f64 = 20.0;
 /// difference vanishes.
 const K: f64 = 2.0 * PI / 8.0;
 
+/// The converged image of `view` with `tools`, the volume at [`placement`].
 fn render(
     db: &Path,
     tf: &TransferFunction,
@@ -34,12 +34,7 @@ fn render(
     view: &View,
     cfg: &RenderConfig,
 ) -> Vec<[f32; 4]> {
-    let mut r = Renderer::new(db, cfg).unwrap();
-    r.set_transfer_function(1, tf).unwrap();
-    r.set_tools(1, tools).unwrap();
-    let mut f = r.converge(&placement(), &[*view], cfg, 40).unwrap();
-    assert_valid("render", &f.images[0]);
-    f.images.remove(0)
+    support::render_tools(db, tf, tools, &placement(), view, cfg)
 }
 
 fn placement() -> Placement {

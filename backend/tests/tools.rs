@@ -14,23 +14,9 @@ use parallax_common::config::{Mode, RenderConfig, Shading};
 use parallax_common::tf::{ControlPoint, TransferFunction};
 use parallax_common::tools::{BandPicker, ClipPlane, Probe, Tool};
 use std::path::Path;
-use support::{assert_valid, exact_config, import_volume, marschner_lobb, mean_alpha, translucent};
+use support::{exact_config, import_volume, marschner_lobb, mean_alpha, translucent};
 
-fn render(
-    db: &Path,
-    tf: &TransferFunction,
-    tools: &[Tool],
-    placement: &Placement,
-    view: &View,
-    cfg: &RenderConfig,
-) -> Vec<[f32; 4]> {
-    let mut r = Renderer::new(db, cfg).unwrap();
-    r.set_transfer_function(1, tf).unwrap();
-    r.set_tools(1, tools).unwrap();
-    let mut f = r.converge(placement, &[*view], cfg, 40).unwrap();
-    assert_valid("render", &f.images[0]);
-    f.images.remove(0)
-}
+use support::render_tools as render;
 
 fn centred(rotation_deg: [f64; 3]) -> Placement {
     Placement {

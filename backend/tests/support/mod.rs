@@ -246,3 +246,21 @@ pub fn ct_placement() -> parallax_common::camera::Placement {
         size: 0.25,
     }
 }
+
+/// The converged image of `view` with `tools` (40 frames at most), checked
+/// finite and in [0, 1].
+pub fn render_tools(
+    db: &Path,
+    tf: &TransferFunction,
+    tools: &[parallax_common::tools::Tool],
+    placement: &parallax_common::camera::Placement,
+    view: &parallax_common::camera::View,
+    cfg: &RenderConfig,
+) -> Vec<[f32; 4]> {
+    let mut r = parallax_backend::render::Renderer::new(db, cfg).unwrap();
+    r.set_transfer_function(1, tf).unwrap();
+    r.set_tools(1, tools).unwrap();
+    let mut f = r.converge(placement, &[*view], cfg, 40).unwrap();
+    assert_valid("render", &f.images[0]);
+    f.images.remove(0)
+}
