@@ -41,28 +41,40 @@ impl Geometry {
     }
 
     /// The size of a level-`level` voxel that refinement compares with a
-    /// pixel, in data units: its real extent, the longest edge
-    /// max(scale · spacing), above the leaves; a leaf's finest edge,
-    /// min(spacing), at the leaves (they cannot be refined; the figure only
-    /// reports how closely they are seen).
+    /// pixel, in data units: the longest of its edges along the axes its
+    /// children halve, max over split(level + 1) of scale · spacing, above
+    /// the leaves; a leaf's finest edge, min(spacing), at the leaves (they
+    /// cannot be refined; the figure only reports how closely they are
+    /// seen).
     ///
-    /// On thick slices (a CT of 0.5 × 0.5 × 4 mm) sizing a coarse voxel by
-    /// its finest edge would let it pass for a pixel-sized voxel and blur
-    /// the slices (RMSE 4e-2 against 2e-4 at full detail, `parallax bench
-    /// anisotropy`); sized by its longest it is refined wherever that edge
-    /// would be seen. The levels of `OctreeLayout::for_spacing` halve the
-    /// finer axes first, so above the source they have 1 × 1 × 4 mm voxels
-    /// (4 mm) where levels halving every axis have 1 × 1 × 8 mm (8 mm): a
-    /// view in which 4 mm is under a pixel is served a level coarser.
+    /// L12 §4.2 refines a node while its voxels project to more than a
+    /// pixel: while refining would show detail the pixel can resolve. What
+    /// refining a node shows is its children's halving, so the edges it
+    /// shortens are the ones to measure; an edge no child halves cannot get
+    /// finer whatever the view. On levels halving every axis this is the
+    /// longest edge. On thick slices (a CT of 0.57 × 0.57 × 5 mm, whose
+    /// levels from `OctreeLayout::for_spacing` halve the in-plane axes
+    /// first: 0.57, 1.14, 2.28 and 4.56 mm in-plane, all 5 mm thick) the
+    /// longest edge is 5 mm on all four, so a view could only have all of
+    /// them or none: sized by what their children halve (4.56, 2.28, 1.14
+    /// mm, then the leaf's 0.57), each level is reached at its own
+    /// distance, and `accuracy` moves through them. Thick slices are never
+    /// blurred by it: a level that coarsens the 5 mm axis (9.1 × 9.1 × 10
+    /// mm) halves every axis, and is sized by its longest edge, 10 mm, as
+    /// before.
     pub fn voxel_len(&self, level: u32) -> f64 {
-        let fold = |f: fn(f64, f64) -> f64, init| self.spacing.iter().cloned().fold(init, f);
         if level >= self.layout.leaf_level() {
-            return fold(f64::min, f64::INFINITY);
+            return self.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
         }
         let scale = self.layout.voxel_scale(level);
-        (0..3)
-            .map(|a| scale[a] as f64 * self.spacing[a])
-            .fold(0.0, f64::max)
+        let split = self.layout.split(level + 1);
+        let edge = |a: usize| scale[a] as f64 * self.spacing[a];
+        let refined = (0..3).filter(|&a| split[a]).map(edge).fold(0.0, f64::max);
+        if refined > 0.0 {
+            refined
+        } else {
+            (0..3).map(edge).fold(0.0, f64::max)
+        }
     }
 }
 

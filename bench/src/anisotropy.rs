@@ -48,13 +48,16 @@ pub fn run_anisotropy(out: &Path) -> Result<Vec<AnisotropyPoint>> {
     anisotropy_study(out, 256, [256, 192], 0.25)
 }
 
+/// The accuracies the thick slices are swept over.
+pub const ACCURACY_SWEEP: [f64; 7] = [0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0];
+
 /// (name, isotropic levels, (accuracy, multilevel) renders) of each import
 /// of a volume.
 type Imports = Vec<(&'static str, bool, Vec<(f64, bool)>)>;
 
 /// The study's volumes: (name, dims, spacing, imports) on a cube of `mm`
 /// millimetres.
-fn volumes(mm: usize, default: f64) -> [(&'static str, [usize; 3], [f64; 3], Imports); 2] {
+fn volumes(mm: usize, default: f64) -> [(&'static str, [usize; 3], [f64; 3], Imports); 3] {
     [
         (
             "isotropic 1 mm",
@@ -62,6 +65,18 @@ fn volumes(mm: usize, default: f64) -> [(&'static str, [usize; 3], [f64; 3], Imp
             [1.0, 1.0, 1.0],
             vec![(
                 "isotropic 1 mm",
+                false,
+                vec![(default, false), (default, true)],
+            )],
+        ),
+        // The thick slices' in-plane detail, isotropic: what their level of
+        // detail does in-plane is what it does here.
+        (
+            "isotropic 0.5 mm",
+            [2 * mm, 2 * mm, 2 * mm],
+            [0.5, 0.5, 0.5],
+            vec![(
+                "isotropic 0.5 mm",
                 false,
                 vec![(default, false), (default, true)],
             )],
@@ -74,7 +89,17 @@ fn volumes(mm: usize, default: f64) -> [(&'static str, [usize; 3], [f64; 3], Imp
                 (
                     "0.5 x 0.5 x 4 mm slices",
                     false,
-                    vec![(default, false), (0.01, false), (default, true)],
+                    // The default, full detail, multilevel, and `accuracy`
+                    // from 0.25 to 16 (the knob must move every level).
+                    [(default, false), (0.01, false), (default, true)]
+                        .into_iter()
+                        .chain(
+                            ACCURACY_SWEEP
+                                .iter()
+                                .filter(|&&a| a != default)
+                                .map(|&a| (a, false)),
+                        )
+                        .collect(),
                 ),
                 (
                     "0.5 x 0.5 x 4 mm slices (levels halving all axes)",
@@ -239,11 +264,11 @@ fn summarize(points: &[AnisotropyPoint], default: f64) {
                 .map(|p| (p.rmse, p.bricks))
                 .unwrap_or((f64::NAN, 0))
         };
-        let iso = at_default("isotropic 1 mm");
+        let iso = at_default("isotropic 0.5 mm");
         let fitted = at_default("0.5 x 0.5 x 4 mm slices");
         let all = at_default("0.5 x 0.5 x 4 mm slices (levels halving all axes)");
         eprintln!(
-            "{vw}: thick slices / isotropic error at the default accuracy: {:.2} ({} bricks; \
+            "{vw}: thick slices / isotropic 0.5 mm error at the default accuracy: {:.2} ({} bricks; \
              levels halving all axes: {:.2}, {} bricks)",
             fitted.0 / iso.0,
             fitted.1,

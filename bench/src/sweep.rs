@@ -140,9 +140,12 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
         &[0.0625, 0.125, 0.25, 0.5, 1.0, 2.0],
         |c, s| c.step_factor = s,
     );
-    add("accuracy", "full", &[1.0, 2.0, 4.0, 8.0, 16.0], |c, a| {
-        c.accuracy = a
-    });
+    add(
+        "accuracy",
+        "full",
+        &[0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0],
+        |c, a| c.accuracy = a,
+    );
     add("interpolation_exact", "full", &[1.0], |c, _| {
         c.interpolation = Interpolation::Exact
     });
@@ -332,7 +335,7 @@ mod tests {
     fn every_knob_changes_the_base() {
         let base = precise_config();
         let s = settings(&base);
-        assert_eq!(s.len(), 44);
+        assert_eq!(s.len(), 46);
         // Each setting differs from the base, except the sweep's own base
         // step (0.25) of the plain step knobs.
         let same: Vec<_> = s

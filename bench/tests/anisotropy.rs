@@ -1,8 +1,10 @@
 //! Thick slices at the default accuracy: a CT-like phantom with 0.5 × 0.5 ×
 //! 4 mm voxels must be rendered about as accurately as the same phantom
-//! with isotropic voxels (`parallax bench anisotropy` at full size), and
-//! where the view is far, levels that halve the finer axes first must serve
-//! it with fewer bricks than levels that halve all three.
+//! with isotropic voxels of its in-plane size (`parallax bench anisotropy`
+//! at full size), within 1e-2 of its exact integral; where the view is far,
+//! levels that halve the finer axes first must serve it with fewer bricks
+//! than levels that halve all three; and `accuracy` from 0.25 to 16 moves
+//! through its levels, error and bricks monotone (issue 40).
 
 use parallax_bench::anisotropy::anisotropy_study;
 use parallax_common::config::RenderConfig;
@@ -27,7 +29,7 @@ fn thick_slices_are_refined_like_isotropic_voxels() {
     let find = |volume: &str, view: &str, accuracy: f64| find_ml(volume, view, accuracy, false);
     let default = RenderConfig::default().accuracy;
     for view in ["near", "far"] {
-        let iso = find("isotropic 1 mm", view, default);
+        let iso = find("isotropic 0.5 mm", view, default);
         let aniso = find("0.5 x 0.5 x 4 mm slices", view, default);
         let all_axes = find(
             "0.5 x 0.5 x 4 mm slices (levels halving all axes)",
@@ -48,7 +50,10 @@ fn thick_slices_are_refined_like_isotropic_voxels() {
             full.rmse,
             full.bricks
         );
-        assert!(iso.rmse > 0.0 && iso.rmse < 1e-2);
+        assert!(iso.rmse > 0.0 && iso.rmse < 3e-2);
+        // The default on thick slices stays within 1e-2 of the exact
+        // integral.
+        assert!(aniso.rmse < 1e-2, "{view}: {}", aniso.rmse);
         assert!(
             aniso.rmse <= 2.0 * iso.rmse,
             "{view}: {} vs {}",
@@ -61,7 +66,7 @@ fn thick_slices_are_refined_like_isotropic_voxels() {
         // parent read at the wrong place would show as errors of the order
         // of the image): as accurate as on isotropic voxels.
         let ml = find_ml("0.5 x 0.5 x 4 mm slices", view, default, true);
-        let ml_iso = find_ml("isotropic 1 mm", view, default, true);
+        let ml_iso = find_ml("isotropic 0.5 mm", view, default, true);
         eprintln!(
             "{view}, multilevel: RMSE {:.2e} ({} bricks), isotropic {:.2e} ({} bricks)",
             ml.rmse, ml.bricks, ml_iso.rmse, ml_iso.bricks
@@ -70,6 +75,32 @@ fn thick_slices_are_refined_like_isotropic_voxels() {
             ml.rmse.is_finite() && ml.rmse <= 2.0 * ml_iso.rmse,
             "{ml:?} {ml_iso:?}"
         );
+        // `accuracy` moves error and bricks monotonically, through more
+        // than the finest level and one other.
+        let sweep: Vec<_> = parallax_bench::anisotropy::ACCURACY_SWEEP
+            .iter()
+            .map(|&a| find("0.5 x 0.5 x 4 mm slices", view, a))
+            .collect();
+        for w in sweep.windows(2) {
+            eprintln!(
+                "{view}: accuracy {} → {}: RMSE {:.2e} → {:.2e}, bricks {} → {}",
+                w[0].accuracy, w[1].accuracy, w[0].rmse, w[1].rmse, w[0].bricks, w[1].bricks
+            );
+            assert!(
+                w[1].bricks <= w[0].bricks && w[1].rmse >= w[0].rmse * 0.999,
+                "{view}: accuracy {} → {} is not monotone",
+                w[0].accuracy,
+                w[1].accuracy
+            );
+        }
+        let mut distinct: Vec<u64> = sweep.iter().map(|p| p.bricks).collect();
+        distinct.dedup();
+        if view == "near" {
+            assert!(
+                distinct.len() >= 3,
+                "near: bricks over the sweep {distinct:?}"
+            );
+        }
         if view == "far" {
             assert!(
                 aniso.bricks < all_axes.bricks,

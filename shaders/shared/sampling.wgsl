@@ -219,14 +219,17 @@ fn levels_of(leaf: Leaf, n: IndexNode) -> Levels {
     return lv;
 }
 
-// The voxel length refinement sizes a level by (backend/src/loader/
-// geometry.rs `voxel_len`): the finest edge at the leaves, the longest above.
+// The voxel length refinement sizes a level by (backend/src/geometry.rs
+// `voxel_len`): the finest edge at the leaves; above, the longest of the
+// edges its children halve.
 fn level_voxel(level: u32) -> f32 {
     if (level >= frame.counts.y) {
         return frame.spacing.w;
     }
     let e = frame.spacing.xyz * level_scale(level);
-    return max(max(e.x, e.y), e.z);
+    let h = e * vec3<f32>(level_split(level + 1u));
+    let refined = max(max(h.x, h.y), h.z);
+    return select(max(max(e.x, e.y), e.z), refined, refined > 0.0);
 }
 
 // How many levels coarser than `level` the view needs the point p: log2 of

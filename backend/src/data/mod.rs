@@ -29,7 +29,7 @@ use anyhow::{bail, Result};
 
 pub use self::nrrd::NrrdWriter;
 pub use self::raw::RawSource;
-pub use self::synth::{synth_value, write_synth, SynthKind};
+pub use self::synth::{synth_value, write_synth, write_thick_ct, SynthKind};
 
 /// How to read a headerless raw volume (`parallax import x.raw --dims …
 /// --type … --spacing …`, docs/design.md "Command line"): the header a raw file

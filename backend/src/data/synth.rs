@@ -264,20 +264,51 @@ pub const CT_HU: (f64, f64) = (-1024.0, 3071.0);
 /// noise (uniform ±20 HU per voxel, deterministic), mostly air around it.
 /// Returned on [0, 1] over [`CT_HU`].
 fn ct(p: [f64; 3], i: usize, j: usize, k: usize) -> f64 {
+    ct_scanned(ct_hu(p), i, j, k)
+}
+
+/// The CT phantom's Hounsfield units at p, without noise.
+fn ct_hu(p: [f64; 3]) -> f64 {
     let sum: f64 = SHEPP_LOGAN
         .iter()
         .filter(|e| inside(e, p))
         .map(|e| e.density)
         .sum();
-    let hu = if sum <= 0.5 {
+    if sum <= 0.5 {
         -1000.0
     } else if sum >= 1.5 {
         1000.0
     } else {
         40.0 + (sum - 1.02) * 1000.0
-    };
+    }
+}
+
+/// `hu` as voxel (i, j, k) of the scanner stores it: with its noise
+/// (uniform ±20 HU, deterministic), on [0, 1] over [`CT_HU`].
+fn ct_scanned(hu: f64, i: usize, j: usize, k: usize) -> f64 {
     let noise = (lattice(i as i64, j as i64, k as i64, 99) - 0.5) * 40.0;
     ((hu + noise - CT_HU.0) / (CT_HU.1 - CT_HU.0)).clamp(0.0, 1.0)
+}
+
+/// Sub-samples across a thick slice's thickness.
+const SLICE_PROFILE: usize = 8;
+
+/// Voxel (i, j, k) of the CT phantom scanned in `slices` thick slices over
+/// the cube an n³ scan covers (n × n × slices voxels): the mean of the
+/// anatomy across the slice's thickness at [`SLICE_PROFILE`] depths (the
+/// partial volume a thick slice averages, as a scanner's slice profile
+/// does), with the scanner's per-voxel noise. On [0, 1] over [`CT_HU`].
+pub fn thick_ct_value(i: usize, j: usize, k: usize, n: usize, slices: usize) -> f64 {
+    let (x, y) = (coord(i, n), coord(j, n));
+    let thickness = 2.0 / slices as f64;
+    let hu = (0..SLICE_PROFILE)
+        .map(|s| {
+            let z = -1.0 + thickness * (k as f64 + (s as f64 + 0.5) / SLICE_PROFILE as f64);
+            ct_hu([x, y, z])
+        })
+        .sum::<f64>()
+        / SLICE_PROFILE as f64;
+    ct_scanned(hu, i, j, k)
 }
 
 /// Width in voxels of the stiff checkerboard's cells.
@@ -314,10 +345,63 @@ pub fn write_synth(
     n: usize,
     voxel_type: VoxelType,
     path: &Path,
-    mut progress: impl FnMut(u64),
+    progress: impl FnMut(u64),
 ) -> Result<()> {
     ensure!(n > 0, "{}: --size must be at least 1", path.display());
-    let mut writer = NrrdWriter::create(path, [n; 3], voxel_type, [1.0; 3])?;
+    let writer = NrrdWriter::create(path, [n; 3], voxel_type, [1.0; 3])?;
+    write_slices(
+        writer,
+        kind,
+        n,
+        n,
+        voxel_type,
+        |i, j, k| synth_value(kind, i, j, k, n),
+        progress,
+    )
+}
+
+/// Writes the CT phantom as a thick-slice scan (`parallax synth ct --slices
+/// N`): n × n × `slices` voxels of 1 × 1 × n/slices ([`thick_ct_value`]), so
+/// that it covers the cube an n³ scan does.
+pub fn write_thick_ct(
+    n: usize,
+    slices: usize,
+    voxel_type: VoxelType,
+    path: &Path,
+    progress: impl FnMut(u64),
+) -> Result<()> {
+    ensure!(n > 0, "{}: --size must be at least 1", path.display());
+    ensure!(
+        (1..=n).contains(&slices),
+        "{}: --slices must be in 1..=--size (got {slices})",
+        path.display()
+    );
+    let thickness = n as f64 / slices as f64;
+    let writer = NrrdWriter::create(path, [n, n, slices], voxel_type, [1.0, 1.0, thickness])?;
+    write_slices(
+        writer,
+        SynthKind::Ct,
+        n,
+        slices,
+        voxel_type,
+        |i, j, k| thick_ct_value(i, j, k, n, slices),
+        progress,
+    )
+}
+
+/// Writes `slices` z-slices of n × n voxels of `value` (on [0, 1]), each
+/// computed in parallel over its rows. [0, 1] maps to the full range of an
+/// integer type, or to Hounsfield units for the CT phantom where the type
+/// holds them, and is kept as is for floats.
+fn write_slices(
+    mut writer: NrrdWriter,
+    kind: SynthKind,
+    n: usize,
+    slices: usize,
+    voxel_type: VoxelType,
+    value: impl Fn(usize, usize, usize) -> f64 + Sync,
+    mut progress: impl FnMut(u64),
+) -> Result<()> {
     let (lo, hi) = match (kind, voxel_type) {
         // The CT phantom keeps Hounsfield units where the type can hold them.
         (SynthKind::Ct, t) if !matches!(t, VoxelType::U8 | VoxelType::U16 | VoxelType::I8) => CT_HU,
@@ -325,10 +409,10 @@ pub fn write_synth(
         (_, t) => t.limits(),
     };
     let mut slice = vec![0f32; n * n];
-    for k in 0..n {
+    for k in 0..slices {
         slice.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
             for (i, v) in row.iter_mut().enumerate() {
-                *v = (lo + synth_value(kind, i, j, k, n) * (hi - lo)) as f32;
+                *v = (lo + value(i, j, k) * (hi - lo)) as f32;
             }
         });
         writer.write_slices(&slice)?;
@@ -357,6 +441,35 @@ mod tests {
             .filter(|&(j, k)| hu(n / 2, j, k) < -900.0)
             .count();
         assert!(air_voxels * 4 > n * n, "{air_voxels}");
+    }
+
+    #[test]
+    fn a_thick_slice_averages_the_anatomy_across_its_thickness() {
+        let (n, slices) = (64, 8);
+        let hu = |v: f64| CT_HU.0 + v * (CT_HU.1 - CT_HU.0);
+        // Air stays air; the noise is the scanner's, per voxel.
+        let air = hu(thick_ct_value(0, 0, 0, n, slices));
+        assert!((-1020.0..=-980.0).contains(&air), "{air}");
+        // A thick slice is the mean of the thin slices it spans, and where
+        // it holds air and tissue, neither (partial volume).
+        let thin = |i, j, k| hu(synth_value(SynthKind::Ct, i, j, k, n));
+        let (i, j) = (n / 2, n / 2 + 8);
+        let per = n / slices;
+        let mut worst: f64 = 0.0;
+        for k in 0..slices {
+            let thick = hu(thick_ct_value(i, j, k, n, slices));
+            let mean = (0..per).map(|d| thin(i, j, k * per + d)).sum::<f64>() / per as f64;
+            worst = worst.max((thick - mean).abs());
+        }
+        // Both carry ±20 HU of noise and sample the slab at other depths.
+        assert!(worst < 200.0, "{worst}");
+        let values: Vec<f64> = (0..slices)
+            .map(|k| hu(thick_ct_value(i, j, k, n, slices)))
+            .collect();
+        assert!(
+            values.iter().any(|&v| v > -900.0 && v < -100.0),
+            "a slice mixing air and tissue (partial volume): {values:?}"
+        );
     }
 
     #[test]
