@@ -32,6 +32,55 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `synth ct --slices`: a thick-slice scan of the CT phantom imports with
+/// its slice thickness, in levels that halve the in-plane axes first.
+#[test]
+fn a_thick_slice_ct_is_synthesised_and_imported() {
+    let d = tempfile::tempdir().unwrap();
+    let vol = d.path().join("thick.nrrd");
+    let out = ok(&[
+        "synth",
+        "ct",
+        "--size",
+        "64",
+        "--slices",
+        "8",
+        "--type",
+        "i16",
+        "-o",
+        s(&vol),
+    ]);
+    assert!(out.contains("64 × 64 × 8 i16, slices 8.000 thick"), "{out}");
+    let db = d.path().join("thick.pxo");
+    ok(&["import", s(&vol), "-o", s(&db), "--brick", "16"]);
+    let info = ok(&["info", s(&db)]);
+    assert!(info.contains("64 × 64 × 8 i16"), "{info}");
+    assert!(info.contains("spacing:       1 × 1 × 8"), "{info}");
+    assert!(info.contains("voxels of 2 × 2 × 8"), "{info}");
+    let e = fails(&[
+        "synth",
+        "shells",
+        "--size",
+        "16",
+        "--slices",
+        "4",
+        "-o",
+        s(&vol),
+    ]);
+    assert!(e.contains("--slices"), "{e}");
+    let e = fails(&[
+        "synth",
+        "ct",
+        "--size",
+        "16",
+        "--slices",
+        "32",
+        "-o",
+        s(&vol),
+    ]);
+    assert!(e.contains("--slices must be in 1..=--size"), "{e}");
+}
+
 #[test]
 fn synth_import_info_verify() {
     let d = tempfile::tempdir().unwrap();
