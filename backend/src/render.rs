@@ -362,8 +362,8 @@ impl Renderer {
     }
 
     /// The value windows [b₀, b₃] of the tools that declare one (the band
-    /// picker) and act fully on
-    /// every ray of this frame (G10 §4): where ω_a = 1 a segment whose
+    /// picker) and act fully on every ray of this frame (G10 §4): where
+    /// ω_a = 1 a segment whose
     /// values all miss a picker's band gets opacity × 0 (and importance 0),
     /// exactly nothing, so a node or a macrocell whose value range misses a
     /// window is empty for this frame — the loader does not load it, the

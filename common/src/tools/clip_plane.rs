@@ -1,7 +1,7 @@
 //! `clip-plane` (`shaders/enhancers/clip-plane.wgsl`): G10 §4 "Clip plane
 //! with view-dependent context".
 
-use super::{smoothstep, Checker, Enhancer, Field, Needs, PackContext, Rule};
+use super::{smoothstep, Checker, Enhancer, Field, Needs, PackContext, Rule, REACH_M};
 use crate::camera::Placement;
 use crate::overlay::{plane_in_box, subdivided, Shape};
 use anyhow::Result;
@@ -41,9 +41,9 @@ impl Enhancer for ClipPlane {
         ..Needs::NOTHING
     };
     const FIELDS: &'static [Field] = &[
-        Field::new("point", "point (m)", 0.001, Rule::Range(-10.0, 10.0)),
+        Field::new("point", "point (m)", 0.001, Rule::Range(-REACH_M, REACH_M)),
         Field::new("normal", "normal", 0.1, Rule::Direction),
-        Field::new("thickness", "thickness (m)", 0.001, Rule::Range(0.0, 10.0)),
+        Field::new("thickness", "thickness (m)", 0.001, Rule::Range(0.0, REACH_M)),
         Field::new("context", "context", 0.05, Rule::Ordered(0.0, 1.0)),
     ];
 
@@ -77,9 +77,9 @@ impl Enhancer for ClipPlane {
     }
 
     fn bounds(&self, c: &Checker) -> Result<()> {
-        c.within_all(&self.point, -10.0, 10.0, "point")?;
+        c.within_all(&self.point, -REACH_M, REACH_M, "point")?;
         c.within_all(&self.normal, -1e3, 1e3, "normal")?;
-        c.within(self.thickness, 0.0, 10.0, "thickness")
+        c.within(self.thickness, 0.0, REACH_M, "thickness")
     }
 
     /// A plane whose cut-away side and band miss the box changes no ray (its

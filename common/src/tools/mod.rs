@@ -34,6 +34,10 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// How far from the screen's centre a tool's pose and size may reach (m),
+/// whichever way it is set (scene, script, live page).
+pub const REACH_M: f64 = 10.0;
+
 /// Enhancers chained in one kernel at most (G10 §5: "a series of up to three
 /// chained enhancing behaviors").
 pub const MAX_ENHANCERS: usize = 3;

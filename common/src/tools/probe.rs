@@ -1,7 +1,9 @@
 //! `probe` (`shaders/enhancers/probe.wgsl`): G10 §4 "Context-preserving
 //! probe", Eqs. 4–5.
 
-use super::{default_alignment, default_axis, Checker, Enhancer, Field, Needs, PackContext, Rule};
+use super::{
+    default_alignment, default_axis, Checker, Enhancer, Field, Needs, PackContext, Rule, REACH_M,
+};
 use crate::overlay::{circle, Shape};
 use anyhow::{bail, Result};
 use glam::DVec3;
@@ -72,8 +74,8 @@ impl Enhancer for Probe {
         ..Needs::NOTHING
     };
     const FIELDS: &'static [Field] = &[
-        Field::new("center", "center (m)", 0.001, Rule::Range(-10.0, 10.0)),
-        Field::new("radius", "radius (m)", 0.001, Rule::Range(1e-9, 10.0)),
+        Field::new("center", "center (m)", 0.001, Rule::Range(-REACH_M, REACH_M)),
+        Field::new("radius", "radius (m)", 0.001, Rule::Range(1e-9, REACH_M)),
         Field::new("axis", "axis", 0.1, Rule::Direction),
         Field::new("alignment", "alignment", 0.01, Rule::Ordered(0.0, 1.0)),
         Field::new("gradient", "gradient", 0.01, Rule::Ordered(0.0, 1.0)),
@@ -106,23 +108,27 @@ impl Enhancer for Probe {
     }
 
     fn check(&self, c: &Checker) -> Result<()> {
-        if !self.center.iter().all(|x| x.is_finite() && x.abs() <= 10.0) {
+        if !self.center.iter().all(|x| x.is_finite() && x.abs() <= REACH_M) {
             bail!(
-                "{}: center must be finite and within 10 m (got {:?})",
+                "{}: center must be finite and within {REACH_M} m (got {:?})",
                 c.what,
                 self.center
             );
         }
-        if !(self.radius.is_finite() && self.radius > 0.0 && self.radius <= 10.0) {
-            bail!("{}: radius must be in (0, 10] m (got {})", c.what, self.radius);
+        if !(self.radius.is_finite() && self.radius > 0.0 && self.radius <= REACH_M) {
+            bail!(
+                "{}: radius must be in (0, {REACH_M}] m (got {})",
+                c.what,
+                self.radius
+            );
         }
         c.direction(&self.axis, "axis")?;
         c.unit_pair(&self.alignment, "alignment", "a_l, a_h")?;
         c.unit_pair(&self.gradient, "gradient", "g_l, g_h")
     }
 
+    /// Its centre and radius are bounded by `check`.
     fn bounds(&self, c: &Checker) -> Result<()> {
-        c.within_all(&self.center, -10.0, 10.0, "center")?;
         c.within_all(&self.axis, -1e3, 1e3, "axis")
     }
 

@@ -135,7 +135,7 @@ pub struct ToolEdit {
 /// How far the volume's centre may be from the screen's (m, per axis):
 /// pan and focus stop there, and a state is refused beyond it, so every
 /// state the server sends can be applied again from its link.
-pub const CENTER_LIMIT: f64 = 10.0;
+pub const CENTER_LIMIT: f64 = parallax_common::tools::REACH_M;
 
 /// The default `grow-band` tolerance: a twentieth of the transfer
 /// function's value span.
