@@ -21,7 +21,7 @@ SECS=${1:-10}
 shift || true
 TARGETS=("$@")
 if [ ${#TARGETS[@]} -eq 0 ]; then
-  TARGETS=(nrrd nhdr nifti raw dicom tiff pxo toml preset live wire)
+  TARGETS=(nrrd nhdr nifti raw dicom tiff pxo toml preset live wire zarr)
 fi
 export RUSTFLAGS="-Cpasses=sancov-module -Cllvm-args=-sanitizer-coverage-level=4 \
 -Cllvm-args=-sanitizer-coverage-inline-8bit-counters -Cllvm-args=-sanitizer-coverage-pc-table \

@@ -19,8 +19,9 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 /// The parsers, by the name `PARALLAX_FUZZ` and the corpus folders use.
-pub const TARGETS: [&str; 11] = [
+pub const TARGETS: [&str; 12] = [
     "nrrd", "nhdr", "nifti", "raw", "dicom", "tiff", "pxo", "toml", "preset", "live", "wire",
+    "zarr",
 ];
 
 /// Runs `target` on one input; panics where a parser broke its promise.
@@ -52,6 +53,7 @@ pub fn run(target: &str, input: &[u8]) {
         "preset" => preset(input),
         "live" => live(input),
         "wire" => wire(input),
+        "zarr" => zarr(dir, input),
         other => panic!("PARALLAX_FUZZ={other}: not one of {TARGETS:?}"),
     }
 }
@@ -96,6 +98,36 @@ const SCENE: &str =
 [placement]\ncenter = [0, 0, 0]\nsize = 0.2\nrotation_deg = [10, 20, 0]\n\
 [render]\neta = 0.5\nshading = \"phong\"\n\
 [[tool]]\nkind = \"band-picker\"\nband = [10, 20, 30, 40]\n";
+
+/// An OME-Zarr image (NGFF 0.5, Zarr v3: a group, one 4×4×4 u8 array
+/// `s0` of one gzip chunk). The first byte chooses the file the rest
+/// replaces: the group's `zarr.json` (the NGFF metadata), the array's
+/// `zarr.json`, or the chunk.
+fn zarr(dir: &Path, input: &[u8]) {
+    let root = dir.join("z.ome.zarr");
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(root.join("s0/c/0/0")).unwrap();
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(&(0..64u8).collect::<Vec<u8>>()).unwrap();
+    let files = [
+        ("zarr.json", ZARR_GROUP.as_bytes().to_vec()),
+        ("s0/zarr.json", ZARR_ARRAY.as_bytes().to_vec()),
+        ("s0/c/0/0/0", gz.finish().unwrap()),
+    ];
+    let (which, body) = input.split_first().unwrap_or((&0, &[]));
+    for (i, (name, default)) in files.iter().enumerate() {
+        let bytes = if i == *which as usize % files.len() {
+            body
+        } else {
+            default
+        };
+        std::fs::write(root.join(name), bytes).unwrap();
+    }
+    expect(volume(&root), "z.ome.zarr");
+}
+
+const ZARR_GROUP: &str = r#"{"zarr_format": 3, "node_type": "group", "attributes": {"ome": {"version": "0.5", "multiscales": [{"axes": [{"name": "z", "type": "space", "unit": "micrometer"}, {"name": "y", "type": "space", "unit": "micrometer"}, {"name": "x", "type": "space", "unit": "micrometer"}], "datasets": [{"path": "s0", "coordinateTransformations": [{"type": "scale", "scale": [2.0, 0.5, 0.5]}]}]}]}}}"#;
+const ZARR_ARRAY: &str = r#"{"zarr_format": 3, "node_type": "array", "shape": [4, 4, 4], "data_type": "uint8", "chunk_grid": {"name": "regular", "configuration": {"chunk_shape": [4, 4, 4]}}, "chunk_key_encoding": {"name": "default", "configuration": {"separator": "/"}}, "fill_value": 0, "codecs": [{"name": "bytes"}, {"name": "gzip", "configuration": {"level": 1}}]}"#;
 
 /// Writes `input` as `dir/name` and parses it; an error must name the file.
 fn file(dir: &Path, name: &str, input: &[u8], parse: fn(&Path) -> Result<()>) {

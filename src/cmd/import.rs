@@ -14,7 +14,8 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// .nrrd | .nhdr | .nii | .nii.gz | .raw (with --dims/--type/--spacing)
-    /// | .tif/.tiff (multi-page) | a folder of DICOM slices or of TIFFs
+    /// | .tif/.tiff (multi-page) | a folder of DICOM slices or of TIFFs |
+    /// an OME-Zarr image or Zarr array (v2 or v3)
     input: PathBuf,
     #[arg(short, long)]
     output: PathBuf,
@@ -46,14 +47,23 @@ pub struct Args {
     /// Raw input: u8 | i8 | u16 | i16 | u32 | i32 | f32 | f64
     #[arg(long = "type", value_parser = args::voxel_type)]
     voxel_type: Option<VoxelType>,
-    /// Raw or TIFF input: sx,sy,sz (raw default 1,1,1; TIFF default from
-    /// ImageJ metadata, else 1,1,1)
+    /// Raw, TIFF or Zarr input: sx,sy,sz (raw default 1,1,1; TIFF default
+    /// from ImageJ metadata, else 1,1,1; OME-Zarr from its scale)
     #[arg(long, value_parser = args::list::<f64, 3>)]
     spacing: Option<[f64; 3]>,
     /// DICOM folder with several series: the SeriesInstanceUID to import
     /// (or its number in the listing)
     #[arg(long)]
     series: Option<String>,
+    /// OME-Zarr: the resolution level to import (0, the finest, by default)
+    #[arg(long)]
+    level: Option<usize>,
+    /// OME-Zarr: the channel to import (0 by default)
+    #[arg(long)]
+    channel: Option<usize>,
+    /// OME-Zarr: the time point to import (0 by default)
+    #[arg(long)]
+    time: Option<usize>,
     /// NaN in float input: refuse (an error naming the voxel) or empty
     /// ("no data": never shown, never blended into its neighbours)
     #[arg(long, value_enum, default_value_t = NanPolicy::Refuse)]
@@ -94,6 +104,11 @@ pub fn run(a: Args) -> Result<()> {
             series: a.series,
             spacing: a.spacing,
             nan_empty: a.nan == NanPolicy::Empty,
+            zarr: data::zarr::ZarrSelect {
+                level: a.level,
+                channel: a.channel,
+                time: a.time,
+            },
         },
     )?;
     let described = src.describe();

@@ -18,6 +18,8 @@ pub struct Args {
     /// u8 | i8 | u16 | i16 | u32 | i32 | f32 | f64
     #[arg(long = "type", default_value = "u8", value_parser = args::voxel_type)]
     voxel_type: VoxelType,
+    /// vol.nrrd, or vol.ome.zarr (an OME-Zarr image: NGFF 0.5, Zarr v3,
+    /// chunks of 64³, zstd)
     #[arg(short, long)]
     output: PathBuf,
     /// ct only: scan the same cube in this many thick slices (size × size ×

@@ -21,6 +21,7 @@ pub mod presets;
 pub mod raw;
 pub mod synth;
 pub mod tiff;
+pub mod zarr;
 
 use std::path::Path;
 
@@ -60,6 +61,8 @@ pub struct InputOptions {
     /// NaN in float input means "no data" (`--nan empty`) instead of an
     /// error.
     pub nan_empty: bool,
+    /// Which level, channel and time point of an OME-Zarr image.
+    pub zarr: zarr::ZarrSelect,
 }
 
 /// Opens a volume for streaming: a folder of DICOM slices or of TIFFs, a
@@ -74,7 +77,23 @@ pub fn open_with(path: &Path, opts: &InputOptions) -> Result<Box<dyn VolumeSourc
 
 fn open_any(path: &Path, opts: &InputOptions) -> Result<Box<dyn VolumeSource + Send>> {
     if opts.raw.is_none() {
+        if zarr::is_zarr(path) {
+            return Ok(Box::new(zarr::open_zarr(path, &opts.zarr, opts.spacing)?));
+        }
+        if opts.zarr != zarr::ZarrSelect::default() {
+            bail!(
+                "{}: --level, --channel and --time choose within an OME-Zarr image, and this is not one",
+                path.display()
+            );
+        }
         if path.is_dir() {
+            let lower = path.to_string_lossy().to_lowercase();
+            if lower.trim_end_matches('/').ends_with(".zarr") {
+                bail!(
+                    "{}: a .zarr folder without Zarr metadata (zarr.json for Zarr v3; .zgroup, .zattrs or .zarray for v2)",
+                    path.display()
+                );
+            }
             let has_tiff = !tiff::stack_files(path)?.is_empty();
             return if has_tiff {
                 Ok(Box::new(tiff::open_tiff(path, opts.spacing)?))

@@ -335,7 +335,51 @@ pub fn synth_value(kind: SynthKind, i: usize, j: usize, k: usize, n: usize) -> f
     }
 }
 
-/// Writes an n³ volume of `kind` as a NRRD (spacing 1), one z-slice at a
+/// Where a synthetic volume goes: a NRRD, or an OME-Zarr image where the
+/// name ends in `.zarr` (spacing in millimetres, as a scanner's).
+enum Sink {
+    Nrrd(NrrdWriter),
+    Zarr(Box<super::zarr::ZarrWriter>),
+}
+
+impl Sink {
+    fn create(
+        path: &Path,
+        dims: [usize; 3],
+        voxel_type: VoxelType,
+        spacing: [f64; 3],
+    ) -> Result<Self> {
+        let name = path.to_string_lossy().to_lowercase();
+        Ok(if name.trim_end_matches('/').ends_with(".zarr") {
+            Sink::Zarr(Box::new(super::zarr::ZarrWriter::create(
+                path,
+                dims,
+                voxel_type,
+                spacing,
+                "millimeter",
+            )?))
+        } else {
+            Sink::Nrrd(NrrdWriter::create(path, dims, voxel_type, spacing)?)
+        })
+    }
+
+    fn write_slices(&mut self, values: &[f32]) -> Result<()> {
+        match self {
+            Sink::Nrrd(w) => w.write_slices(values),
+            Sink::Zarr(w) => w.write_slices(values),
+        }
+    }
+
+    fn finish(self) -> Result<()> {
+        match self {
+            Sink::Nrrd(w) => w.finish(),
+            Sink::Zarr(w) => w.finish(),
+        }
+    }
+}
+
+/// Writes an n³ volume of `kind` as a NRRD, or an OME-Zarr image where
+/// the name ends in `.zarr` (spacing 1), one z-slice at a
 /// time, so that even 1024³ never lives in memory; each slice is computed in
 /// parallel over its rows. [0, 1] maps to the full range of an integer type
 /// (0..255, 0..65535; −32768..32767 for i16) and is kept as is for f32.
@@ -348,7 +392,7 @@ pub fn write_synth(
     progress: impl FnMut(u64),
 ) -> Result<()> {
     ensure!(n > 0, "{}: --size must be at least 1", path.display());
-    let writer = NrrdWriter::create(path, [n; 3], voxel_type, [1.0; 3])?;
+    let writer = Sink::create(path, [n; 3], voxel_type, [1.0; 3])?;
     write_slices(
         writer,
         kind,
@@ -377,7 +421,7 @@ pub fn write_thick_ct(
         path.display()
     );
     let thickness = n as f64 / slices as f64;
-    let writer = NrrdWriter::create(path, [n, n, slices], voxel_type, [1.0, 1.0, thickness])?;
+    let writer = Sink::create(path, [n, n, slices], voxel_type, [1.0, 1.0, thickness])?;
     write_slices(
         writer,
         SynthKind::Ct,
@@ -394,7 +438,7 @@ pub fn write_thick_ct(
 /// integer type, or to Hounsfield units for the CT phantom where the type
 /// holds them, and is kept as is for floats.
 fn write_slices(
-    mut writer: NrrdWriter,
+    mut writer: Sink,
     kind: SynthKind,
     n: usize,
     slices: usize,
