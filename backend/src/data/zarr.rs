@@ -541,7 +541,8 @@ impl ZarrSource {
             .collect();
         let depth = (z1 - z0) as usize;
         let slice = nx * ny;
-        self.slab.clear();
+        // Every voxel of the slab is written below (the chunks cover every
+        // y and x): the buffer is kept between slabs, not zeroed.
         self.slab.resize(slice * depth, 0.0);
         // Offsets of the fixed axes inside a chunk (C order).
         let chunk_len: u64 = self.chunk.iter().product();
@@ -591,6 +592,9 @@ impl ZarrSource {
         self.rounding.add(rounding);
         self.slab_z0 = z0 as usize;
         self.slab_len = depth;
+        if !self.info.voxel_type.is_float() {
+            return Ok(()); // integers are finite
+        }
         check_finite(
             &self.label,
             self.info.dims,

@@ -55,28 +55,62 @@ pub fn stored_len(b: usize) -> usize {
 /// The cell ranges of a brick of side `b` from its stored values
 /// (`value(i)`: the data value of stored voxel i, `None` for no data).
 pub fn ranges(b: usize, value: impl Fn(usize) -> Option<f64>) -> Vec<[f32; 2]> {
+    let s = b + 2 * OVERLAP;
+    // Rounding to f32 keeps the order, so the extremes are those of the
+    // values as given.
+    let values: Vec<f32> = (0..s * s * s)
+        .map(|i| value(i).map_or(f32::NAN, |v| v as f32))
+        .collect();
+    ranges_of(b, &values)
+}
+
+/// The cell ranges of a brick of side `b` from its (b+4)³ stored values,
+/// NaN for no data: a cell's [lo, hi] over the voxels interpolation inside
+/// it reads, (+∞, −∞) where none has data. Separable: the extremes along x
+/// of every row's cell spans, then along y of those, then along z, so each
+/// stored value is read once (the cells' spans overlap by two voxels).
+pub fn ranges_of(b: usize, values: &[f32]) -> Vec<[f32; 2]> {
     let (c, m) = layout(b);
     let s = b + 2 * OVERLAP;
-    let mut out = Vec::with_capacity(c * c * c);
-    for cz in 0..c {
+    assert_eq!(values.len(), s * s * s, "a brick's stored values");
+    // Interpolation at core coordinate u ∈ [k·M, (k+1)·M] (voxel centres at
+    // i + ½) reads core voxels k·M − 1 … (k+1)·M, stored OVERLAP further on.
+    let span = |k: usize| k * m + OVERLAP - 1..(k + 1) * m + OVERLAP + 1;
+    // f32::min and max pass over NaN: voxels without data take no part.
+    let none = [f32::INFINITY, f32::NEG_INFINITY];
+    let widen = |e: &mut [f32; 2], o: [f32; 2]| {
+        e[0] = e[0].min(o[0]);
+        e[1] = e[1].max(o[1]);
+    };
+    // Along x: per row (z, y), per cell column cx.
+    let mut rows = vec![none; s * s * c];
+    for (row, out) in values.chunks_exact(s).zip(rows.chunks_exact_mut(c.max(1))) {
+        for (cx, e) in out.iter_mut().enumerate().take(c) {
+            for &v in &row[span(cx)] {
+                widen(e, [v, v]);
+            }
+        }
+    }
+    // Along y: per slice z, per cell (cy, cx).
+    let mut planes = vec![none; s * c * c];
+    for z in 0..s {
         for cy in 0..c {
-            for cx in 0..c {
-                // Interpolation at core coordinate u ∈ [c·M, (c+1)·M] (voxel
-                // centres at i + ½) reads core voxels c·M − 1 … (c+1)·M,
-                // stored OVERLAP further on.
-                let span = |k: usize| k * m + OVERLAP - 1..=(k + 1) * m + OVERLAP;
-                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-                for z in span(cz) {
-                    for y in span(cy) {
-                        for x in span(cx) {
-                            if let Some(v) = value((z * s + y) * s + x) {
-                                lo = lo.min(v);
-                                hi = hi.max(v);
-                            }
-                        }
-                    }
+            let out = &mut planes[(z * c + cy) * c..(z * c + cy + 1) * c];
+            for y in span(cy) {
+                let r = &rows[(z * s + y) * c..(z * s + y + 1) * c];
+                for (e, &o) in out.iter_mut().zip(r) {
+                    widen(e, o);
                 }
-                out.push([lo as f32, hi as f32]);
+            }
+        }
+    }
+    // Along z.
+    let mut out = vec![none; c * c * c];
+    for cz in 0..c {
+        let cells = &mut out[cz * c * c..(cz + 1) * c * c];
+        for z in span(cz) {
+            for (e, &o) in cells.iter_mut().zip(&planes[z * c * c..(z + 1) * c * c]) {
+                widen(e, o);
             }
         }
     }
@@ -128,6 +162,59 @@ pub fn decode(bytes: &[u8], min: f32, max: f32) -> Vec<[f32; 2]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every cell's extremes read voxel by voxel over its span.
+    fn brute(b: usize, values: &[f32]) -> Vec<[f32; 2]> {
+        let (c, m) = layout(b);
+        let s = b + 2 * OVERLAP;
+        let span = |k: usize| k * m + OVERLAP - 1..=(k + 1) * m + OVERLAP;
+        let mut out = Vec::new();
+        for cz in 0..c {
+            for cy in 0..c {
+                for cx in 0..c {
+                    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                    for z in span(cz) {
+                        for y in span(cy) {
+                            for x in span(cx) {
+                                let v = values[(z * s + y) * s + x];
+                                if !v.is_nan() {
+                                    lo = lo.min(v as f64);
+                                    hi = hi.max(v as f64);
+                                }
+                            }
+                        }
+                    }
+                    out.push([lo as f32, hi as f32]);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn separable_ranges_equal_the_cell_by_cell_extremes() {
+        for b in [4, 8, 16, 32, 64] {
+            let s = b + 2 * OVERLAP;
+            let hole = layout(b).1 + OVERLAP + 1;
+            // Values with NaN (no data) scattered, and the first cell's
+            // span all NaN.
+            let values: Vec<f32> = (0..s * s * s)
+                .map(|i| {
+                    let (x, y, z) = (i % s, (i / s) % s, i / (s * s));
+                    if (i * 2654435761usize).is_multiple_of(97)
+                        || (x < hole && y < hole && z < hole)
+                    {
+                        f32::NAN
+                    } else {
+                        ((i * 7919) % 2003) as f32 * 0.37 - 300.0
+                    }
+                })
+                .collect();
+            let fast = ranges_of(b, &values);
+            assert_eq!(fast, brute(b, &values), "b = {b}");
+            assert!(fast[0][0] > fast[0][1], "b = {b}: the hole has no data");
+        }
+    }
 
     #[test]
     fn decoded_ranges_hold_the_values() {

@@ -77,7 +77,7 @@ const BATCH: usize = 64;
 /// Imports `src` into the database `out` (written under a temporary name and
 /// renamed when complete).
 pub fn import(
-    src: &mut dyn VolumeSource,
+    src: &mut (dyn VolumeSource + Send),
     out: &Path,
     source_name: &str,
     opts: &ImportOptions,
@@ -145,18 +145,39 @@ pub fn import(
     let (mut vmin, mut vmax) = (f32::INFINITY, f32::NEG_INFINITY);
     let mut no_data = 0u64;
     let leaf = layout.leaf_level() as usize;
-    for z in 0..info.dims[2] {
-        let mut slice = vec![0f32; info.slice_len()];
-        src.read_slices(&mut slice)
-            .with_context(|| format!("{source_name}: reading slice {z}"))?;
-        for &v in &slice {
-            vmin = vmin.min(v);
-            vmax = vmax.max(v);
-            no_data += v.is_nan() as u64;
+    // The source is read on a thread of its own, PREFETCH slices ahead, so
+    // that reading and decoding the input overlap the levels' averaging
+    // and the bricks' encoding (docs/performance.md "Import").
+    let (nz, slice_len) = (info.dims[2], info.slice_len());
+    std::thread::scope(|scope| -> Result<()> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Vec<f32>>>(PREFETCH);
+        scope.spawn(move || {
+            for z in 0..nz {
+                let mut slice = vec![0f32; slice_len];
+                let read = src
+                    .read_slices(&mut slice)
+                    .map(|_| slice)
+                    .with_context(|| format!("{source_name}: reading slice {z}"));
+                let failed = read.is_err();
+                // The importer stops taking slices when it fails.
+                if tx.send(read).is_err() || failed {
+                    break;
+                }
+            }
+        });
+        for _ in 0..nz {
+            let slice = rx
+                .recv()
+                .map_err(|_| anyhow::anyhow!("{source_name}: the reader stopped"))??;
+            let (lo, hi, nan) = slice_stats(&slice);
+            vmin = vmin.min(lo);
+            vmax = vmax.max(hi);
+            no_data += nan;
+            push_slice(&mut levels, leaf, slice, &mut sink)?;
+            bar.inc(1);
         }
-        push_slice(&mut levels, leaf, slice, &mut sink)?;
-        bar.inc(1);
-    }
+        Ok(())
+    })?;
     // Flush from the finest level up: each level's last odd slice feeds its
     // parent before the parent emits its final rows.
     for l in (0..=leaf).rev() {
@@ -197,6 +218,51 @@ pub fn import(
 }
 
 /// Bytes the slice windows and brick batches take at most.
+/// A slice's smallest and largest value (NaN aside) and its NaN count, in
+/// eight lanes the compiler vectorises (`f32::min` per value, which must
+/// pass over NaN, was an eighth of an import's time, all of it on the one
+/// thread that feeds the others).
+fn slice_stats(values: &[f32]) -> (f32, f32, u64) {
+    // Blocks on every core; min, max and a count are the same in any order.
+    values.par_chunks(1 << 16).map(block_stats).reduce(
+        || (f32::INFINITY, f32::NEG_INFINITY, 0),
+        |a, b| (a.0.min(b.0), a.1.max(b.1), a.2 + b.2),
+    )
+}
+
+fn block_stats(values: &[f32]) -> (f32, f32, u64) {
+    const L: usize = 8;
+    let mut lo = [f32::INFINITY; L];
+    let mut hi = [f32::NEG_INFINITY; L];
+    let mut nan = [0u32; L];
+    let chunks = values.chunks_exact(L);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for k in 0..L {
+            let v = c[k];
+            // A comparison with NaN is false: NaN never becomes an extreme.
+            lo[k] = if v < lo[k] { v } else { lo[k] };
+            hi[k] = if v > hi[k] { v } else { hi[k] };
+            nan[k] += v.is_nan() as u32;
+        }
+    }
+    let (mut l, mut h, mut n) = (f32::INFINITY, f32::NEG_INFINITY, 0u64);
+    for k in 0..L {
+        l = l.min(lo[k]);
+        h = h.max(hi[k]);
+        n += nan[k] as u64;
+    }
+    for &v in rest {
+        l = l.min(v);
+        h = h.max(v);
+        n += v.is_nan() as u64;
+    }
+    (l, h, n)
+}
+
+/// Slices the reader thread may have read ahead of the import.
+const PREFETCH: usize = 2;
+
 pub fn memory_needed(layout: &OctreeLayout) -> u64 {
     // Saturating: a layout past every machine's memory says so, not wraps.
     let window = (layout.brick + 2 * OVERLAP + 1) as u64;
@@ -214,7 +280,13 @@ pub fn memory_needed(layout: &OctreeLayout) -> u64 {
     let batch = (BATCH as u64)
         .saturating_mul(layout.stored_len() as u64)
         .saturating_mul(8);
-    slices.saturating_add(batch)
+    // The slices read ahead, and the one being read.
+    let d = layout.level_dims(layout.leaf_level());
+    let ahead = (PREFETCH as u64 + 1)
+        .saturating_mul(d[0] as u64)
+        .saturating_mul(d[1] as u64)
+        .saturating_mul(4);
+    slices.saturating_add(batch).saturating_add(ahead)
 }
 
 /// One level's rolling window of slices.
@@ -311,7 +383,12 @@ fn push_slice(levels: &mut [Level], l: usize, slice: Vec<f32>, sink: &mut Sink) 
         }
         match (half, lv.pending.take()) {
             (Some(h), _) if !hz => Some(h),
-            (Some(h), Some(p)) => Some(p.iter().zip(&h).map(|(&a, &b)| mean2(a, b)).collect()),
+            (Some(h), Some(p)) => Some(
+                p.par_iter()
+                    .zip(h.par_iter())
+                    .map(|(&a, &b)| mean2(a, b))
+                    .collect(),
+            ),
             (Some(h), None) => {
                 lv.pending = Some(h);
                 None
@@ -349,10 +426,12 @@ fn halve_xy(s: &[f32], nx: usize, ny: usize, halve_x: bool, halve_y: bool) -> Ve
     };
     let hx = if halve_x { nx.div_ceil(2) } else { nx };
     let hy = if halve_y { ny.div_ceil(2) } else { ny };
-    let mut out = Vec::with_capacity(hx * hy);
-    for j in 0..hy {
+    let mut out = vec![0f32; hx * hy];
+    // Rows in parallel (each output voxel is computed alone: the same
+    // values in any order).
+    out.par_chunks_mut(hx).enumerate().for_each(|(j, row)| {
         let (y0, y1) = pair(j, ny, halve_y);
-        for i in 0..hx {
+        for (i, o) in row.iter_mut().enumerate() {
             let (x0, x1) = pair(i, nx, halve_x);
             let mut taps = [f32::NAN; 4];
             taps[0] = s[y0 * nx + x0];
@@ -369,9 +448,9 @@ fn halve_xy(s: &[f32], nx: usize, ny: usize, halve_x: bool, halve_y: bool) -> Ve
                 .iter()
                 .filter(|v| !v.is_nan())
                 .fold((0f32, 0f32), |(s, n), &v| (s + v, n + 1.0));
-            out.push(if n > 0.0 { sum / n } else { f32::NAN });
+            *o = if n > 0.0 { sum / n } else { f32::NAN };
         }
-    }
+    });
     out
 }
 
@@ -496,10 +575,7 @@ fn encode_brick(
     });
     // Its macrocell ranges follow the encoded values (format 4).
     let seen = decoded.as_deref().unwrap_or(&values);
-    let cell_ranges = cells::ranges(b, |i| {
-        let v = seen[i];
-        (!v.is_nan()).then_some(v as f64)
-    });
+    let cell_ranges = cells::ranges_of(b, seen);
     bytes.extend_from_slice(&cells::encode(&cell_ranges, min, max));
     if let (true, Some(decoded)) = (leaf, &decoded) {
         // Measure the quantisation error on the source voxels this brick owns,
