@@ -4,7 +4,7 @@
 # and as OME-Zarr (NGFF 0.5, Zarr v3, 64³ zstd chunks), then imported with the
 # defaults and a memory budget; MB/s of source and peak resident memory.
 #
-#   bash bench/import_throughput.sh [SIZES] [MEMORY_MB]    (default "512 1024 2048" 1024)
+#   bash bench/import_throughput.sh [SIZES] [MEMORY_MB]    (default "512 1024 2048" 2048)
 #
 # The page cache: each file is imported right after it was written, twice up
 # to 1024³ (the second import's figure is reported: read from the page
@@ -15,7 +15,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SIZES=${1:-"512 1024 2048"}
-MEM=${2:-1024}
+MEM=${2:-2048}
 cargo build --release --locked 2>&1 | tail -n 1
 px=$PWD/target/release/parallax
 out=out/bench-import

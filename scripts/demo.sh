@@ -3,7 +3,8 @@
 # then renders it on the desktop display with two transfer functions (opaque
 # skin, translucent brain tissue), opened by a clip plane, and with MImDA;
 # then on a 16-projector light field wall, where eyes at different places see
-# different things (G10 §4). Images land in out/demo/.
+# different things (G10 §4); and a CT imported from an OME-Zarr image.
+# Images land in out/demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/setup.sh
@@ -37,6 +38,13 @@ cp "$out/shading/frame_00007/window.png" "$out/colin27-shading.png"
 cp "$out/overlay/frame_00007/window.png" "$out/colin27-overlay.png"
 cp "$out/mimda/frame_00007/window.png" "$out/colin27-mimda.png"
 cp "$out/iso/frame_00007/window.png" "$out/colin27-iso.png"
+
+# OME-Zarr: the CT phantom written as an OME-Zarr image (NGFF 0.5, Zarr v3,
+# 64³ zstd chunks), imported from it, rendered with the CT-Bone preset.
+$px synth ct --size 192 --type i16 -o "$out/ct.ome.zarr"
+$px import "$out/ct.ome.zarr" -o "$out/ct-zarr.pxo"
+$px render --scene configs/scenes/ct-zarr.toml --frames 8 --sync --out "$out/ct-zarr"
+cp "$out/ct-zarr/frame_00007/window.png" "$out/ct-zarr.png"
 
 # The light field: a 16-projector wall (η = 1), and what five eyes along
 # the viewing line see on it. `wall SCENE NAME` renders the wall's scene
@@ -76,6 +84,6 @@ echo
 echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png, $out/colin27-clip.png,"
 echo "         $out/colin27-mimda.png, $out/colin27-iso.png, $out/wall16-eyes.png, $out/wall16-clip-eyes.png,"
 echo "         $out/colin27-probe.png, $out/colin27-band.png, $out/colin27-shading.png, $out/wall16-probe-eyes.png, $out/wall16-band-eyes.png,"
-echo "         $out/colin27-overlay.png, $out/wall16-overlay-eyes.png"
+echo "         $out/colin27-overlay.png, $out/wall16-overlay-eyes.png, $out/ct-zarr.png (from an OME-Zarr image)"
 echo "         and $out/looking-glass-panel.png (the panel of a Looking Glass, interleaved for its lenses)"
 echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"

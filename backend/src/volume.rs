@@ -161,6 +161,11 @@ pub trait VolumeSource {
     /// NaN in the input means "no data": passed on as NaN instead of
     /// refused (sources whose samples cannot be NaN ignore this).
     fn set_nan_empty(&mut self) {}
+    /// Bytes the source itself holds while it is read (an OME-Zarr source's
+    /// slab of one row of chunks), counted in the import's memory budget.
+    fn buffer_bytes(&self) -> u64 {
+        0
+    }
 }
 
 /// A whole volume in memory: the reference integrator's input and the small

@@ -81,8 +81,9 @@ pub struct ZarrSource {
     fixed: Vec<u64>,
     /// Chunk shape (a regular grid).
     chunk: Vec<u64>,
-    /// The decoded slab: slices `slab_z0 ..` of the volume, x fastest.
-    slab: Vec<f32>,
+    /// The decoded slab: slices `slab_z0 ..` of the volume, x fastest, in
+    /// the samples' own type (u64 words: aligned for every type).
+    slab: Vec<u64>,
     slab_z0: usize,
     slab_len: usize,
     next: usize,
@@ -466,7 +467,7 @@ pub fn open_zarr(path: &Path, sel: &ZarrSelect, spacing: Option<[f64; 3]>) -> Re
 }
 
 /// Samples a chunk holds, as `f64` for conversion (exact for every type).
-trait Sample: Copy + Send + Sync + zarrs::array::ElementOwned + 'static {
+trait Sample: bytemuck::Pod + Send + Sync + zarrs::array::ElementOwned + 'static {
     fn value(self) -> f64;
 }
 macro_rules! sample {
@@ -478,21 +479,39 @@ macro_rules! sample {
 }
 sample!(u8, i8, u16, i16, u32, i32, f32, f64);
 
-impl ZarrSource {
-    /// Decodes the row of chunks at chunk row `zc` along z into the slab.
-    fn load_slab(&mut self, zc: u64) -> Result<()> {
-        match self.info.voxel_type {
-            VoxelType::U8 => self.load_slab_as::<u8>(zc),
-            VoxelType::I8 => self.load_slab_as::<i8>(zc),
-            VoxelType::U16 => self.load_slab_as::<u16>(zc),
-            VoxelType::I16 => self.load_slab_as::<i16>(zc),
-            VoxelType::U32 => self.load_slab_as::<u32>(zc),
-            VoxelType::I32 => self.load_slab_as::<i32>(zc),
-            VoxelType::F32 => self.load_slab_as::<f32>(zc),
-            VoxelType::F64 => self.load_slab_as::<f64>(zc),
+/// Calls the method `Self::$f::<T>` with the Rust type of a sample type.
+macro_rules! with_type {
+    ($t:expr, $f:ident ( $($arg:expr),* )) => {
+        match $t {
+            VoxelType::U8 => Self::$f::<u8>($($arg),*),
+            VoxelType::I8 => Self::$f::<i8>($($arg),*),
+            VoxelType::U16 => Self::$f::<u16>($($arg),*),
+            VoxelType::I16 => Self::$f::<i16>($($arg),*),
+            VoxelType::U32 => Self::$f::<u32>($($arg),*),
+            VoxelType::I32 => Self::$f::<i32>($($arg),*),
+            VoxelType::F32 => Self::$f::<f32>($($arg),*),
+            VoxelType::F64 => Self::$f::<f64>($($arg),*),
         }
+    };
+}
+
+/// Chunks decoded at once per core: decoded chunks wait in memory only
+/// until they are copied into the slab.
+const CHUNKS_PER_CORE: usize = 4;
+
+impl ZarrSource {
+    /// Bytes the source holds while reading: the slab of one chunk row in
+    /// the samples' own type, and the chunks decoded at once.
+    fn buffer_len(&self) -> u64 {
+        let n = self.chunk.len();
+        let bytes = self.info.voxel_type.bytes() as u64;
+        let chunk: u64 = self.chunk.iter().product();
+        let at_once = (rayon::current_num_threads() * CHUNKS_PER_CORE) as u64;
+        (self.info.slice_len() as u64 * self.chunk[n - 3] + at_once * chunk) * bytes
     }
 
+    /// Decodes the row of chunks at chunk row `zc` along z into the slab,
+    /// in the samples' own type (half the memory of f32 for 16-bit data).
     fn load_slab_as<T: Sample>(&mut self, zc: u64) -> Result<()> {
         let n = self.chunk.len();
         let [nx, ny, nz] = self.info.dims;
@@ -518,88 +537,91 @@ impl ZarrSource {
                 idx
             })
             .collect();
-        let array = &self.array;
-        let array_label = &self.array_label;
-        let decoded: Vec<Result<(Vec<T>, bool)>> = indices
-            .par_iter()
-            .map(|idx| {
-                let name = || {
-                    format!(
-                        "{array_label}: chunk {idx:?} (key \"{}\")",
-                        array.chunk_key(idx)
-                    )
-                };
-                match array.retrieve_chunk_if_exists::<Vec<T>>(idx) {
-                    Ok(Some(v)) => Ok((v, false)),
-                    Ok(None) => array
-                        .retrieve_chunk::<Vec<T>>(idx)
-                        .map(|v| (v, true))
-                        .map_err(|e| anyhow!("{}: cannot decode: {e}", name())),
-                    Err(e) => Err(anyhow!("{}: cannot decode: {e}", name())),
-                }
-            })
-            .collect();
         let depth = (z1 - z0) as usize;
         let slice = nx * ny;
         // Every voxel of the slab is written below (the chunks cover every
-        // y and x): the buffer is kept between slabs, not zeroed.
-        self.slab.resize(slice * depth, 0.0);
+        // y and x): the buffer is kept between slabs, not zeroed. It is
+        // held as u64 words, aligned for every sample type.
+        let words = (slice * depth * std::mem::size_of::<T>()).div_ceil(8);
+        self.slab.resize(words, 0);
+        let slab: &mut [T] =
+            &mut bytemuck::cast_slice_mut::<u64, T>(&mut self.slab)[..slice * depth];
         // Offsets of the fixed axes inside a chunk (C order).
         let chunk_len: u64 = self.chunk.iter().product();
-        let inner: u64 = cz * cy * cx;
         let mut lead_off = 0u64;
         for (a, &k) in self.fixed.iter().enumerate() {
             let stride: u64 = self.chunk[a + 1..].iter().product();
             lead_off += (k % self.chunk[a]) * stride;
         }
-        let mut rounding = Rounding::default();
-        let exact = self.info.voxel_type.may_round();
-        for (idx, res) in indices.iter().zip(decoded) {
-            let (values, missing) = res?;
-            ensure!(
-                values.len() as u64 == chunk_len,
-                "{}: chunk {idx:?} decoded to {} values, expected {chunk_len}",
-                self.array_label,
-                values.len()
-            );
-            if missing {
-                self.missing += 1;
-            }
-            self.chunks_read += 1;
-            let (yc, xc) = (idx[n - 2], idx[n - 1]);
-            let (y0, x0) = (yc * cy, xc * cx);
-            let y1 = (y0 + cy).min(ny as u64);
-            let x1 = (x0 + cx).min(nx as u64);
-            for z in 0..depth as u64 {
-                for y in y0..y1 {
-                    let src = (lead_off + z * cy * cx + (y - y0) * cx) as usize;
-                    let dst = z as usize * slice + y as usize * nx + x0 as usize;
-                    let w = (x1 - x0) as usize;
-                    for (o, &s) in self.slab[dst..dst + w]
-                        .iter_mut()
-                        .zip(&values[src..src + w])
-                    {
-                        let v = s.value();
-                        *o = v as f32;
-                        if exact {
-                            rounding.add_value(v, *o);
-                        }
+        let array = &self.array;
+        let array_label = &self.array_label;
+        let at_once = rayon::current_num_threads() * CHUNKS_PER_CORE;
+        for batch in indices.chunks(at_once) {
+            let decoded: Vec<Result<(Vec<T>, bool)>> = batch
+                .par_iter()
+                .map(|idx| {
+                    let name = || {
+                        format!(
+                            "{array_label}: chunk {idx:?} (key \"{}\")",
+                            array.chunk_key(idx)
+                        )
+                    };
+                    match array.retrieve_chunk_if_exists::<Vec<T>>(idx) {
+                        Ok(Some(v)) => Ok((v, false)),
+                        Ok(None) => array
+                            .retrieve_chunk::<Vec<T>>(idx)
+                            .map(|v| (v, true))
+                            .map_err(|e| anyhow!("{}: cannot decode: {e}", name())),
+                        Err(e) => Err(anyhow!("{}: cannot decode: {e}", name())),
+                    }
+                })
+                .collect();
+            for (idx, res) in batch.iter().zip(decoded) {
+                let (values, missing) = res?;
+                ensure!(
+                    values.len() as u64 == chunk_len,
+                    "{array_label}: chunk {idx:?} decoded to {} values, expected {chunk_len}",
+                    values.len()
+                );
+                self.missing += missing as u64;
+                self.chunks_read += 1;
+                let (y0, x0) = (idx[n - 2] * cy, idx[n - 1] * cx);
+                let y1 = (y0 + cy).min(ny as u64);
+                let w = ((x0 + cx).min(nx as u64) - x0) as usize;
+                for z in 0..depth as u64 {
+                    for y in y0..y1 {
+                        let src = (lead_off + z * cy * cx + (y - y0) * cx) as usize;
+                        let dst = z as usize * slice + y as usize * nx + x0 as usize;
+                        slab[dst..dst + w].copy_from_slice(&values[src..src + w]);
                     }
                 }
             }
-            debug_assert!(lead_off + inner <= chunk_len);
         }
-        self.rounding.add(rounding);
         self.slab_z0 = z0 as usize;
         self.slab_len = depth;
+        Ok(())
+    }
+
+    /// Slice `k` of the slab as data values.
+    fn slice_as<T: Sample>(&mut self, k: usize, out: &mut [f32]) -> Result<()> {
+        let slice = self.info.slice_len();
+        let slab: &[T] = &bytemuck::cast_slice::<u64, T>(&self.slab)[k * slice..(k + 1) * slice];
+        let exact = self.info.voxel_type.may_round();
+        for (o, &s) in out.iter_mut().zip(slab) {
+            let v = s.value();
+            *o = v as f32;
+            if exact {
+                self.rounding.add_value(v, *o);
+            }
+        }
         if !self.info.voxel_type.is_float() {
             return Ok(()); // integers are finite
         }
         check_finite(
             &self.label,
             self.info.dims,
-            z0 * slice as u64,
-            &self.slab,
+            ((self.slab_z0 + k) * slice) as u64,
+            out,
             self.nan_empty,
         )
     }
@@ -618,6 +640,7 @@ impl VolumeSource for ZarrSource {
             self.label
         );
         let cz = self.chunk[self.chunk.len() - 3] as usize;
+        let t = self.info.voxel_type;
         for dst in out.chunks_mut(slice) {
             ensure!(
                 self.next < self.info.dims[2],
@@ -625,10 +648,11 @@ impl VolumeSource for ZarrSource {
                 self.label
             );
             if !(self.slab_z0..self.slab_z0 + self.slab_len).contains(&self.next) {
-                self.load_slab((self.next / cz) as u64)?;
+                let zc = (self.next / cz) as u64;
+                with_type!(t, load_slab_as(self, zc))?;
             }
             let k = self.next - self.slab_z0;
-            dst.copy_from_slice(&self.slab[k * slice..(k + 1) * slice]);
+            with_type!(t, slice_as(self, k, dst))?;
             self.next += 1;
         }
         if self.next == self.info.dims[2] {
@@ -636,6 +660,10 @@ impl VolumeSource for ZarrSource {
             self.slab_len = 0;
         }
         Ok(())
+    }
+
+    fn buffer_bytes(&self) -> u64 {
+        self.buffer_len()
     }
 
     fn conversion_note(&self) -> Option<String> {

@@ -100,11 +100,11 @@ pub fn import(
     } else {
         OctreeLayout::for_spacing(info.dims, opts.brick, info.spacing)
     };
-    let need = memory_needed(&layout);
+    let need = memory_needed(&layout).saturating_add(src.buffer_bytes());
     if need > opts.memory_mb as u64 * (1 << 20) {
         bail!(
             "{source_name}: --memory-mb {}: importing {}×{}×{} with {}³ bricks needs at least {} MiB \
-             (slice windows of every level); raise --memory-mb",
+             (slice windows of every level, and what the source buffers); raise --memory-mb",
             opts.memory_mb,
             info.dims[0],
             info.dims[1],
@@ -560,19 +560,8 @@ fn encode_brick(
     if empty {
         return e;
     }
-    let mut bytes = codec::encode(&values, min, max, opts.encoding, opts.codec);
     // What the renderer will interpolate: the values as decoded.
-    let decoded = (opts.encoding != BrickEncoding::F32).then(|| {
-        codec::decode_checked(
-            &bytes,
-            min,
-            max,
-            opts.encoding,
-            values.len(),
-            codec::Framing::Tagged,
-        )
-        .expect("a brick just encoded decodes")
-    });
+    let (mut bytes, decoded) = codec::encode_decoded(&values, min, max, opts.encoding, opts.codec);
     // Its macrocell ranges follow the encoded values (format 4).
     let seen = decoded.as_deref().unwrap_or(&values);
     let cell_ranges = cells::ranges_of(b, seen);

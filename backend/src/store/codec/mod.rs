@@ -240,22 +240,46 @@ pub fn encode(
     encoding: BrickEncoding,
     codec: Codec,
 ) -> Vec<u8> {
+    encode_decoded(values, min, max, encoding, codec).0
+}
+
+/// [`encode`], and for quantised encodings the values as a reader decodes
+/// them (dequantised from the codes just made, not decompressed again).
+pub fn encode_decoded(
+    values: &[f32],
+    min: f32,
+    max: f32,
+    encoding: BrickEncoding,
+    codec: Codec,
+) -> (Vec<u8>, Option<Vec<f32>>) {
     // Without an early exit, so that the loop is vectorised.
     let no_data =
         encoding != BrickEncoding::F32 && values.iter().fold(false, |a, v| a | v.is_nan());
     let unit = unit_step_fits(values, min, max, encoding, no_data);
-    let mut out = compress(
-        &quantise(values, min, max, encoding, no_data, unit),
-        encoding,
-        codec,
-    );
+    let codes = quantise(values, min, max, encoding, no_data, unit);
+    let mut out = compress(&codes, encoding, codec);
     if no_data {
         out[0] |= NO_DATA_BIT;
     }
     if unit {
         out[0] |= UNIT_STEP_BIT;
     }
-    out
+    let decoded = (encoding != BrickEncoding::F32)
+        .then(|| dequantise(&codes, min, max, encoding, no_data, unit));
+    debug_assert_eq!(
+        decoded
+            .as_ref()
+            .map(|d| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>()),
+        (encoding != BrickEncoding::F32).then(|| {
+            decode_checked(&out, min, max, encoding, values.len(), Framing::Tagged)
+                .expect("a brick just encoded decodes")
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>()
+        }),
+        "the codes decode to what the reader decodes"
+    );
+    (out, decoded)
 }
 
 /// A brick's values as the bytes the encoding stores (little endian). With
@@ -607,11 +631,12 @@ impl Quantiser {
         }
         // Round half away from zero, clamped to the codes: for x ≥ 0,
         // truncating x + ½ is the rounding (x + ½ rounds to a multiple of
-        // x's ulp, never across an integer); below 0, NaN included, the
-        // saturating cast gives 0. Without SSE4.1 `f64::round` is a library
-        // call per voxel, a tenth of an import's time.
+        // x's ulp, never across an integer); the saturating cast takes
+        // what lies below 0 (NaN included, which casts to 0) and above
+        // 2³¹ to the clamp's ends. Without SSE4.1 `f64::round` is a
+        // library call per voxel, a tenth of an import's time.
         let x = (v as f64 - self.min) / self.step;
-        ((x + 0.5) as u64).min(self.steps as u64) as u32
+        ((x + 0.5) as i32).clamp(0, self.steps as i32) as u32
     }
 
     fn value(&self, code: u32) -> f32 {

@@ -287,3 +287,49 @@ fn corruption_is_detected() {
         );
     }
 }
+
+#[test]
+fn the_codes_round_as_f64_round_does_and_the_integer_test_is_fract() {
+    // Quantiser::quantise rounds by truncating x + ½ (no library call):
+    // the same codes as round-half-away-from-zero, clamped, for every x,
+    // ties, negative, NaN, infinite and huge ones included.
+    for encoding in [BrickEncoding::U8Range, BrickEncoding::U16Range] {
+        let q = Quantiser::new(0.0, 1.0, encoding, false, true);
+        let steps = encoding.steps();
+        let mut xs: Vec<f64> = (-2000..200_000).map(|i| i as f64 * 0.5).collect();
+        xs.extend((0..100_000).map(|i| (i as f64 * 0.7310585786300049).fract() * 70000.0 - 10.0));
+        for k in 0..200 {
+            let t = k as f64 + 0.5;
+            xs.extend([
+                t,
+                f64::from_bits(t.to_bits() - 1),
+                f64::from_bits(t.to_bits() + 1),
+            ]);
+        }
+        xs.extend([
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            3e9,
+            -3e9,
+            1e300,
+            -0.0,
+        ]);
+        for x in xs {
+            // With min 0 and the unit step, quantise(v) sees x = v.
+            let v = x as f32;
+            let want = if (v as f64).is_nan() {
+                0
+            } else {
+                (v as f64).round().clamp(0.0, steps) as u32
+            };
+            assert_eq!(q.quantise(v), want, "{encoding:?}: {v}");
+        }
+    }
+    for v in [
+        0.0f32, -0.0, 1.0, -1.5, 2.5, 8388607.5, 8388608.0, 1e30, -1e30, 0.1, 123456.0,
+    ] {
+        assert_eq!(is_integer(v), v.fract() == 0.0, "{v}");
+    }
+    assert!(!is_integer(f32::INFINITY) && !is_integer(f32::NAN));
+}
