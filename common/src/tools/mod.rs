@@ -524,7 +524,8 @@ impl Tool {
 
     /// The names of the tool's numeric fields (those a script may key).
     pub fn numeric_fields(&self) -> Vec<String> {
-        self.table()
+        let mut names: Vec<String> = self
+            .table()
             .map(|m| {
                 m.into_iter()
                     .filter(|(_, v)| {
@@ -535,7 +536,11 @@ impl Tool {
                     .map(|(k, _)| k)
                     .collect()
             })
-            .unwrap_or_default()
+            .unwrap_or_default();
+        // In name order whatever the map's own order (serde_json keeps
+        // insertion order where a dependency turns on `preserve_order`).
+        names.sort();
+        names
     }
 }
 
