@@ -154,7 +154,6 @@ with open(os.path.join(bad_axes, "zarr.json"), "w") as f:
     json.dump(meta, f)
 
 # A codec Parallax does not read: LZMA, a real numcodecs compressor.
-lzma = os.path.join(out, "lzma.ome.zarr")
 ome(
     "lzma.ome.zarr",
     czyx,

@@ -500,16 +500,6 @@ macro_rules! with_type {
 const CHUNKS_PER_CORE: usize = 4;
 
 impl ZarrSource {
-    /// Bytes the source holds while reading: the slab of one chunk row in
-    /// the samples' own type, and the chunks decoded at once.
-    fn buffer_len(&self) -> u64 {
-        let n = self.chunk.len();
-        let bytes = self.info.voxel_type.bytes() as u64;
-        let chunk: u64 = self.chunk.iter().product();
-        let at_once = (rayon::current_num_threads() * CHUNKS_PER_CORE) as u64;
-        (self.info.slice_len() as u64 * self.chunk[n - 3] + at_once * chunk) * bytes
-    }
-
     /// Decodes the row of chunks at chunk row `zc` along z into the slab,
     /// in the samples' own type (half the memory of f32 for 16-bit data).
     fn load_slab_as<T: Sample>(&mut self, zc: u64) -> Result<()> {
@@ -662,8 +652,14 @@ impl VolumeSource for ZarrSource {
         Ok(())
     }
 
+    /// Bytes the source holds while reading: the slab of one chunk row in
+    /// the samples' own type, and the chunks decoded at once.
     fn buffer_bytes(&self) -> u64 {
-        self.buffer_len()
+        let n = self.chunk.len();
+        let bytes = self.info.voxel_type.bytes() as u64;
+        let chunk: u64 = self.chunk.iter().product();
+        let at_once = (rayon::current_num_threads() * CHUNKS_PER_CORE) as u64;
+        (self.info.slice_len() as u64 * self.chunk[n - 3] + at_once * chunk) * bytes
     }
 
     fn conversion_note(&self) -> Option<String> {
