@@ -39,6 +39,11 @@ cp "$out/overlay/frame_00007/window.png" "$out/colin27-overlay.png"
 cp "$out/mimda/frame_00007/window.png" "$out/colin27-mimda.png"
 cp "$out/iso/frame_00007/window.png" "$out/colin27-iso.png"
 
+# A registered layer: the skin of the same scan through its own transfer
+# function, its media added to the brain tissue's.
+$px render --scene configs/scenes/colin27-layers.toml --frames 8 --sync --out "$out/layers"
+cp "$out/layers/frame_00007/window.png" "$out/colin27-layers.png"
+
 # OME-Zarr: the CT phantom written as an OME-Zarr image (NGFF 0.5, Zarr v3,
 # 64³ zstd chunks), imported from it, rendered with the CT-Bone preset.
 $px synth ct --size 192 --type i16 -o "$out/ct.ome.zarr"
@@ -73,6 +78,10 @@ wall colin27-wall-band wall16-band
 # them at the same place in space.
 wall colin27-wall-overlay wall16-overlay
 
+# A layer with view-dependent opacity on the wall: the skin for eyes on the
+# left, the brain tissue for eyes on the right.
+wall colin27-wall-layers wall16-layers
+
 # A Looking Glass Portrait: its 48 views interleaved onto the panel's
 # sub-pixels through the lenticular mapping of its calibration (the display
 # in configs/displays/looking-glass-portrait/ was made from its visual.json
@@ -84,6 +93,7 @@ echo
 echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png, $out/colin27-clip.png,"
 echo "         $out/colin27-mimda.png, $out/colin27-iso.png, $out/wall16-eyes.png, $out/wall16-clip-eyes.png,"
 echo "         $out/colin27-probe.png, $out/colin27-band.png, $out/colin27-shading.png, $out/wall16-probe-eyes.png, $out/wall16-band-eyes.png,"
-echo "         $out/colin27-overlay.png, $out/wall16-overlay-eyes.png, $out/ct-zarr.png (from an OME-Zarr image)"
+echo "         $out/colin27-overlay.png, $out/wall16-overlay-eyes.png, $out/ct-zarr.png (from an OME-Zarr image),"
+echo "         $out/colin27-layers.png, $out/wall16-layers-eyes.png (a registered layer, view-dependent on the wall)"
 echo "         and $out/looking-glass-panel.png (the panel of a Looking Glass, interleaved for its lenses)"
 echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"

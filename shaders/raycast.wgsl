@@ -28,6 +28,7 @@
 #import preint
 #import sampling
 #import traversal
+#import layers
 #import chain
 
 // Phong shading from central-difference gradients.
@@ -361,7 +362,7 @@ fn cells_skip(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t: f32, 
 // shading where it is not transparent, composited by the stepper.
 fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f32>,
                      d: vec3<f32>, tc: f32, tn: f32, s_prev: f32, s: f32, e_prev: TfEnd,
-                     e: TfEnd) -> Sample {
+                     e: TfEnd, ls: LayerSeg, layer_w: vec3<f32>) -> Sample {
     var avg: vec4<f32>;
     if (ANALYTIC_PREINT) {
         avg = analytic_average(s_prev, s);
@@ -371,6 +372,10 @@ fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f
         avg = end_average(e_prev, e);
     } else {
         avg = segment_average(0u, frame.counts.w, s_prev, s);
+    }
+    if (LAYERS > 0u) {
+        // The summed medium of the volume and its registered layers.
+        avg = layered_average(avg, ls, layer_w);
     }
     var smp: Sample;
     smp.pos = o + d * (0.5 * (tc + tn));
@@ -447,6 +452,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     // at the workgroup's index, a value a compiler can know to be uniform
     // across the workgroup.
     load_constants();
+    load_layers();
     let first = select(frame.dispatch.w, 0u, TOOL_TILES);
     let end = select(frame.dispatch.x, frame.dispatch.w, TOOL_TILES);
     let w = first + wg.x + wg.y * groups.x;
@@ -463,6 +469,14 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
     let pray = pixel_ray(view, px);
     var o = pray.o;
     var d = pray.d;
+    // Registered layers: each one's weight along this ray, the values of
+    // the last sample and the media that had data there.
+    var layer_w = vec3<f32>(0.0);
+    if (LAYERS > 0u) {
+        layer_w = layer_weights(d);
+    }
+    var lay_prev = vec3<f32>(0.0);
+    var mask_prev = 0u;
 
     var acc = Acc(vec3<f32>(0.0), 0.0, 0.0);
     var span = clip_box(o, d, frame.extent.xyz);
@@ -518,6 +532,11 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
         let t_exit = walk.t_exit;
         var bent = false;
         let leaf = make_leaf(walk.node, walk.level, walk.cell, walk.slot, walk.values);
+        // Which media have data in this leaf (the slot's mask).
+        var mask = 0u;
+        if (LAYERS > 0u) {
+            mask = bitcast<u32>(slot_range(walk.slot).w);
+        }
         // Multilevel sampling blends in coarser levels only in leaves
         // that the view needs coarser somewhere along the ray (the
         // footprint grows monotonically along a ray from the observer;
@@ -556,7 +575,14 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             // every pass of any of its lanes; as a pass of the loop this
             // sample cost a full pass, here it costs a sample.
             let tn = next_sample(&ray, t, h, &k, tc, t_exit);
-            s_prev = sample_levels(lv, blend, o + d * tn);
+            if (LAYERS > 0u) {
+                let v = sample_layered(leaf, o + d * tn);
+                s_prev = v.x;
+                lay_prev = v.yzw;
+                mask_prev = mask;
+            } else {
+                s_prev = sample_levels(lv, blend, o + d * tn);
+            }
             n_samples = n_samples + 1u;
             if (!ISO) {
                 e_prev = tf_end(s_prev);
@@ -584,6 +610,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             }
             var tn: f32;
             var s: f32;
+            var lay = vec3<f32>(0.0);
             if (LOOKAHEAD) {
                 tn = tn_next;
                 s = s_next;
@@ -593,7 +620,13 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 }
             } else {
                 tn = next_sample(&ray, t, h, &k, tc, t_exit);
-                s = sample_levels(lv, blend, o + d * tn);
+                if (LAYERS > 0u) {
+                    let v = sample_layered(leaf, o + d * tn);
+                    s = v.x;
+                    lay = v.yzw;
+                } else {
+                    s = sample_levels(lv, blend, o + d * tn);
+                }
             }
             n_samples = n_samples + 1u;
             var e: TfEnd;
@@ -620,9 +653,12 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 }
                 continue;
             }
-            let smp = composite_segment(&acc, lv, blend, o, d, tc, tn, s_prev, s, e_prev, e);
+            let smp = composite_segment(&acc, lv, blend, o, d, tc, tn, s_prev, s, e_prev, e,
+                                        LayerSeg(lay_prev, lay, mask & mask_prev), layer_w);
             s_prev = s;
             e_prev = e;
+            lay_prev = lay;
+            mask_prev = mask;
             tc = tn;
             if (record_depth && depth_t < 0.0 && acc.alpha >= 0.5) {
                 depth_t = t_base + tc;

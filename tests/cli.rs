@@ -664,3 +664,87 @@ fn a_crafted_nrrd_size_is_refused_at_once() {
     assert!(secs < 1.0, "took {secs:.2} s");
     assert!(!pxo.exists());
 }
+
+/// A scene's registered layers through the real binary: `info` lists them,
+/// `render` draws them, and a layer that is missing, corrupt or on another
+/// grid, or a layer count the kernel cannot take, is refused naming the
+/// scene file and the layer's field, within a second.
+#[test]
+fn layers_are_listed_rendered_and_bad_ones_refused_naming_the_scene() {
+    let d = tempfile::tempdir().unwrap();
+    marschner_lobb_database(d.path(), 40);
+    let vol = d.path().join("small.nrrd");
+    ok(&["synth", "shells", "--size", "24", "-o", s(&vol)]);
+    ok(&["import", s(&vol), "-o", s(&d.path().join("small.pxo"))]);
+    std::fs::write(d.path().join("corrupt.pxo"), b"PXO not really").unwrap();
+    let head = "volume = \"ml.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\n";
+    write_all(
+        d.path(),
+        &[
+            (
+                "tf.toml",
+                "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 255\ncolor = [1, 1, 1]\nextinction = 0.1\n",
+            ),
+            (
+                "red.toml",
+                "[[point]]\nvalue = 150\ncolor = [1, 0, 0]\nextinction = 0\n[[point]]\nvalue = 255\ncolor = [1, 0, 0]\nextinction = 0.3\n",
+            ),
+            (
+                "display.toml",
+                "[screen]\nsize = [0.3, 0.3]\npixel_size = 0.005\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
+            ),
+            (
+                "p/w.toml",
+                "id = \"w\"\nposition = [0, 0, 0.8]\nresolution = [32, 32]\n",
+            ),
+        ],
+    );
+    let layer = |volume: &str| {
+        format!(
+            "[[layer]]\nvolume = \"{volume}\"\ntransfer_function = \"red.toml\"\nopacity = 0.5\n"
+        )
+    };
+    let scene = write(
+        d.path().join("layers.toml"),
+        &format!("{head}{}", layer("ml.pxo")),
+    );
+    let info = ok(&["info", s(&scene)]);
+    assert!(
+        info.contains("layer[0]") && info.contains("red.toml") && info.contains("opacity 0.5"),
+        "{info}"
+    );
+    let out = d.path().join("out");
+    let text = ok(&[
+        "render",
+        "--scene",
+        s(&scene),
+        "--frames",
+        "3",
+        "--sync",
+        "--out",
+        s(&out),
+    ]);
+    assert!(out.join("frame_00002/w.png").exists(), "{text}");
+    for (text, field) in [
+        (layer("none.pxo"), "layer[0].volume"),
+        (layer("corrupt.pxo"), "layer[0].volume"),
+        (layer("small.pxo"), "layer[0].volume"),
+        (layer("ml.pxo").repeat(4), "layer: 4 layers"),
+    ] {
+        let bad = write(d.path().join("bad.toml"), &format!("{head}{text}"));
+        let t = std::time::Instant::now();
+        let e = fails(&[
+            "render",
+            "--scene",
+            s(&bad),
+            "--frames",
+            "1",
+            "--out",
+            s(&out),
+        ]);
+        let took = t.elapsed();
+        println!("refused in {took:?}: {e}");
+        assert!(e.contains("bad.toml") && e.contains(field), "{field}: {e}");
+        assert!(took.as_secs_f64() < 1.0, "{took:?}");
+    }
+}

@@ -521,6 +521,7 @@ fn wire_seeds() {
         stream: vec![0, 3],
         pick: Some([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]),
         grow: Some(0.05),
+        layers: Vec::new(),
     };
     let tools = vec![
         Tool::ClipPlane(ClipPlane {

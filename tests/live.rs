@@ -972,7 +972,21 @@ fn a_real_browser_drags_the_volume_round() {
         chromium.display()
     );
     let w = World::new([320, 240]);
-    let (url, server) = serve_in_process(w.path("desktop-scene.toml"), 1);
+    // The desktop scene with a registered layer (the volume again, its
+    // brightest values in red), whose row the page shows.
+    std::fs::write(
+        w.path("red.toml"),
+        "[[point]]\nvalue = 200\ncolor = [1, 0.1, 0.1]\nextinction = 0\n[[point]]\nvalue = 255\ncolor = [1, 0.1, 0.1]\nextinction = 0.2\n",
+    )
+    .unwrap();
+    let scene = w.path("desktop-layers.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("desktop-scene.toml")).unwrap()
+            + "[[layer]]\nvolume = \"v.pxo\"\ntransfer_function = \"red.toml\"\n",
+    )
+    .unwrap();
+    let (url, server) = serve_in_process(scene, 1);
     let profile = w.path("chromium-profile");
     let mut browser = Command::new(chromium)
         .args([
@@ -1140,6 +1154,21 @@ fn a_real_browser_drags_the_volume_round() {
                 observer.next_text().await;
             }
             assert_eq!(observer.state["cursor"][1], json!(0.0), "a horizontal drag");
+            // The layer's row: its checkbox hides the layer, its slider
+            // sets the opacity.
+            assert_eq!(cdp.eval("document.querySelectorAll('#layers .layervis').length").await, json!(1));
+            cdp.eval("(() => { document.querySelector('#layers .layervis').click(); return ''; })()").await;
+            let start = Instant::now();
+            while observer.state["layers"][0]["visible"] != json!(false) {
+                assert!(start.elapsed() < WAIT, "the page's layer checkbox never reached the server");
+                observer.next_text().await;
+            }
+            cdp.eval("(() => { const s = document.querySelector('#layers .layeropacity'); s.value = 40; s.dispatchEvent(new Event('input')); return ''; })()").await;
+            let start = Instant::now();
+            while observer.state["layers"][0]["opacity"] != json!(0.4) {
+                assert!(start.elapsed() < WAIT, "the page's layer slider never reached the server");
+                observer.next_text().await;
+            }
             cdp.session = None;
             let _ = cdp.call("Browser.close", json!({})).await;
             observer.send(json!({"type": "quit"})).await;
@@ -1856,4 +1885,84 @@ fn a_hostile_client_mix_neither_stalls_the_session_nor_grows_its_memory() {
         }
     });
     wait_ok(child);
+}
+
+/// A scene's registered layer in the live page's protocol: the hello names
+/// it, the state carries its visibility and opacity, a `layer` message
+/// changes the image (hiding it gives the volume alone, showing it again
+/// the image it had), and a bad index or opacity is refused by name.
+#[test]
+fn a_layers_visibility_and_opacity_change_live() {
+    std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    let w = World::new([96, 72]);
+    std::fs::write(
+        w.path("red.toml"),
+        "[[point]]\nvalue = 100\ncolor = [1, 0.1, 0.1]\nextinction = 0\n[[point]]\nvalue = 255\ncolor = [1, 0.1, 0.1]\nextinction = 0.3\n",
+    )
+    .unwrap();
+    let scene = w.path("layers-scene.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("desktop-scene.toml"))
+            .unwrap()
+            .replace("shading = \"phong\"\n", "shading = \"none\"\n")
+            + "[[layer]]\nvolume = \"v.pxo\"\ntransfer_function = \"red.toml\"\n",
+    )
+    .unwrap();
+    let (url, server) = serve_in_process(scene, 1);
+    runtime().block_on(async {
+        let ws_url = url
+            .replace("http://", "ws://")
+            .replace("/?token=", "/ws?token=");
+        let (ws, _) = tokio_tungstenite::connect_async(ws_url).await.unwrap();
+        let mut a = Client {
+            ws,
+            state: Value::Null,
+            version: 0,
+        };
+        let hello = a.next_text().await;
+        assert_eq!(hello["layers"], json!(["v · red"]), "{hello}");
+        while a.version == 0 {
+            a.next_text().await;
+        }
+        assert_eq!(
+            a.state["layers"],
+            json!([{"visible": true, "opacity": 1.0}])
+        );
+        let shown = a.settled(1).await.pixels();
+        let v = a
+            .change(json!({"type": "layer", "index": 0, "opacity": 0.3}))
+            .await;
+        let faint = a.settled(v).await.pixels();
+        let v = a
+            .change(json!({"type": "layer", "index": 0, "visible": false}))
+            .await;
+        let hidden = a.settled(v).await.pixels();
+        let v = a
+            .change(json!({"type": "layer", "index": 0, "visible": true, "opacity": 1.0}))
+            .await;
+        let again = a.settled(v).await.pixels();
+        let red = |img: &[u8]| img.chunks(3).map(|p| p[0] as f64 - p[2] as f64).sum::<f64>();
+        println!(
+            "layer live: redness {:.0} shown, {:.0} at 0.3, {:.0} hidden, {:.0} shown again; shown vs again {:.3}",
+            red(&shown),
+            red(&faint),
+            red(&hidden),
+            red(&again),
+            diff(&shown, &again)
+        );
+        assert!(red(&shown) > red(&faint) && red(&faint) > red(&hidden));
+        assert!(diff(&shown, &hidden) > 2.0, "hiding the layer changed the image");
+        assert!(diff(&shown, &again) < 0.5, "showing it again restores it");
+        for (bad, says) in [
+            (json!({"type": "layer", "index": 1, "opacity": 0.5}), "index"),
+            (json!({"type": "layer", "index": 0, "opacity": 2.0}), "opacity"),
+        ] {
+            a.send(bad.clone()).await;
+            let e = a.error().await;
+            assert!(e.contains(says), "{bad} → {e}");
+        }
+        a.send(json!({"type": "quit"})).await;
+    });
+    server.join().unwrap().unwrap();
 }

@@ -558,6 +558,51 @@ fn a_clip_plane_band_picker_probe_and_mimda_render_identically_in_the_cluster() 
     }
 }
 
+/// A scene with a registered layer (`[[layer]]`, G10 §4: the volume again
+/// through another transfer function, shown to one side of the wall)
+/// renders under `mpirun -n 3` as embedded, and the layer shows.
+#[test]
+fn a_two_layer_scene_renders_identically_in_the_cluster() {
+    let w = World::new();
+    std::fs::write(
+        w.path("tf-layer.toml"),
+        "[[point]]\nvalue = 150\ncolor = [1, 0.2, 0.1]\nextinction = 0\n\
+         [[point]]\nvalue = 200\ncolor = [1, 0.2, 0.1]\nextinction = 0.3\n",
+    )
+    .unwrap();
+    let scene = w.path("scene-layers.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("scene.toml")).unwrap()
+            + "[[layer]]\nvolume = \"v.pxo\"\ntransfer_function = \"tf-layer.toml\"\n\
+               view_opacity = { axis = [1, 0, -1], angles_deg = [20, 60] }\n",
+    )
+    .unwrap();
+    let cluster = w.path("layers-cluster");
+    let o = mpirun(3, &w.render_args(&cluster, &scene), &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    let embedded = w.path("layers-embedded");
+    let mut args = w.render_args(&embedded, &scene);
+    args.extend(["--backends", "2"]);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", text(&o));
+    let plain = w.path("layers-plain");
+    let o = run(&w.render_args(&plain, &w.path("scene.toml")));
+    assert!(o.status.success(), "{}", text(&o));
+    let mut changed = 0;
+    for id in ["p00", "p01", "p02", "p03"] {
+        for frame in [1, 3] {
+            assert_eq!(
+                npy(&cluster, frame, id),
+                npy(&embedded, frame, id),
+                "projector {id}, frame {frame}"
+            );
+        }
+        changed += (npy(&cluster, 3, id) != npy(&plain, 3, id)) as usize;
+    }
+    assert!(changed > 0, "the layer shows on some projector");
+}
+
 /// Frame reconstruction (G10 §5) per projector in the cluster: the same
 /// images as embedded, and on a static view, once the cut has settled, the
 /// full render bit for bit.

@@ -150,7 +150,8 @@ fn handle(
                     .map(|a| (a, format!("projector {}: adapter", pr.id)))
             });
             let req = crate::gpu::AdapterRequest::from_env(named, link.rank() as usize - 1);
-            let mut renderer = Renderer::with_adapter(&scene.volume, &scene.render, &req)?;
+            let mut renderer =
+                Renderer::with_layers(&scene.volume, &scene.layers, &scene.render, &req)?;
             renderer.sync_io = sync_io;
             let screen = &display.screen;
             renderer.set_lightfield((screen.angular_accuracy_deg > 0.0).then_some(
@@ -299,6 +300,7 @@ fn render_frame(s: &mut Setup, state: &FrameState) -> Result<FrameStats> {
             state.tools_version
         );
     }
+    s.renderer.set_layer_controls(&state.layers)?;
     let views = views_for(&s.display, &s.mine, state);
     let mut frame = s
         .renderer
@@ -467,6 +469,7 @@ mod tests {
             stream: Vec::new(),
             pick: None,
             grow: None,
+            layers: Vec::new(),
         });
         let mut link = Scripted {
             inbox: VecDeque::from([

@@ -13,7 +13,7 @@ use crate::reconstruct::{subframe_of, ViewHistory, SUBFRAMES};
 use crate::store::{BrickEncoding, NodeKey, OctreeDb};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{Filter, Interpolation, Mode, RenderConfig, Shading};
+use parallax_common::config::{Filter, Interpolation, Layer, Mode, RenderConfig, Shading};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::tools::{PackContext, Tool, MAX_ENHANCERS};
@@ -38,8 +38,149 @@ struct ActiveTf {
     function: TransferFunction,
 }
 
+/// A registered layer the renderer draws (`[[layer]]`: visible, with some
+/// opacity, and a transfer function that is not empty over its data).
+struct ActiveLayer {
+    /// Its place among the scene's `[[layer]]`s.
+    index: usize,
+    spec: Layer,
+    db: Arc<OctreeDb>,
+    preint: PreintTable,
+    empty: EmptinessTable,
+    /// No-data voxels take this value (the layer's smallest).
+    fill: f32,
+}
+
+/// The brick caches (the CPU cache in the loader, the GPU pool) and the ray
+/// caster over them, for a volume and the layers drawn with it, within the
+/// budgets of `cfg`.
+fn caches(
+    gpu: &Gpu,
+    db: &Arc<OctreeDb>,
+    layers: &[ActiveLayer],
+    cfg: &RenderConfig,
+) -> Result<(Raycaster, BrickPool, Loader)> {
+    let layout = *db.layout();
+    let channels = BrickPool::channels_for(layers.len());
+    let float = db.encoding() != BrickEncoding::U8Range || channels > 1;
+    let filtering = match cfg.interpolation {
+        Interpolation::Hardware => Filtering::Hardware,
+        Interpolation::Exact => Filtering::Exact,
+    };
+    let raycaster = Raycaster::new(gpu, float, filtering)?;
+    let side = layout.stored_side() as u32;
+    let budget = (cfg.gpu_cache_mb * (1 << 20) as f64) as u64;
+    let slots = BrickPool::layered_slots_for_budget(budget, side, float, channels)
+        .min(crate::index::MAX_INDEX_NODES as u32);
+    // Refining a node needs all its children in core and on the GPU at
+    // once (G08 §4): the smallest budgets that make progress hold the
+    // root and one set of eight children (or just the root, for a
+    // one-brick octree). Smaller ones are refused, with the figure.
+    let (min_slots, min_bricks) = if layout.levels > 1 { (9, 8) } else { (1, 1) };
+    if slots < min_slots {
+        let slot_mib =
+            BrickPool::layered_slot_bytes(side, float, channels) as f64 / (1 << 20) as f64;
+        bail!(
+                "render.gpu_cache_mb = {}: too small: the GPU pool must hold {min_slots} bricks (the root and one set of children) to refine; the smallest that works is {:.2}",
+                cfg.gpu_cache_mb,
+                (min_slots as f64 * slot_mib * 100.0).ceil() / 100.0
+            );
+    }
+    let cpu_budget = (cfg.cpu_cache_mb * (1 << 20) as f64) as u64;
+    let brick_bytes = layout.stored_len() as u64 * 4 * channels as u64;
+    if cpu_budget < min_bricks * brick_bytes {
+        let brick_mib = brick_bytes as f64 / (1 << 20) as f64;
+        bail!(
+                "render.cpu_cache_mb = {}: too small: the CPU cache must hold {min_bricks} bricks (one set of children) to refine; the smallest that works is {:.2}",
+                cfg.cpu_cache_mb,
+                (min_bricks as f64 * brick_mib * 100.0).ceil() / 100.0
+            );
+    }
+    let pool = BrickPool::with_channels(gpu, slots, side, float, channels)?;
+    let layer_sources = layers
+        .iter()
+        .map(|l| (l.db.clone(), l.empty.clone()))
+        .collect();
+    let loader = Loader::with_layers(
+        db.clone(),
+        layer_sources,
+        LoaderConfig {
+            cpu_budget_bytes: cpu_budget,
+            gpu_slots: slots,
+            upload_budget: cfg.upload_budget.max(1),
+            accuracy: cfg.accuracy,
+            use_feedback: cfg.visibility_feedback,
+            frustum_culling: true,
+            io_threads: 2,
+        },
+    );
+    Ok((raycaster, pool, loader))
+}
+
+/// The scene's `[[layer]]`s the renderer draws, opened and checked against
+/// the volume `db`: each on its grid (the same dimensions, bricks and
+/// spacing), with its transfer function's tables over its data range.
+/// Errors name the layer's field and file.
+fn active_layers(db: &OctreeDb, specs: &[Layer]) -> Result<Vec<ActiveLayer>> {
+    let mut out = Vec::new();
+    for (i, spec) in specs.iter().enumerate() {
+        if !spec.visible || spec.opacity <= 0.0 {
+            continue;
+        }
+        let field = |f: &str, p: &Path| format!("layer[{i}].{f} = {}", p.display());
+        let ldb = OctreeDb::open(&spec.volume).with_context(|| field("volume", &spec.volume))?;
+        let (a, b) = (db.layout(), ldb.layout());
+        let (sa, sb) = (db.header.info.spacing, ldb.header.info.spacing);
+        let same_spacing =
+            (0..3).all(|k| (sa[k] - sb[k]).abs() <= 1e-6 * sa[k].abs().max(sb[k].abs()));
+        if a.dims != b.dims || a.brick != b.brick || a.levels != b.levels || !same_spacing {
+            bail!(
+                "{}: the layer's grid ({:?} voxels of {:?}, bricks of {}) is not the scene volume's ({:?} voxels of {:?}, bricks of {}); a layer on another grid needs a transform, which is not supported yet",
+                field("volume", &spec.volume),
+                b.dims,
+                sb,
+                b.brick,
+                a.dims,
+                sa,
+                a.brick
+            );
+        }
+        let tf = TransferFunction::load(&spec.transfer_function)
+            .with_context(|| field("transfer_function", &spec.transfer_function))?;
+        let s = &ldb.summary;
+        let (lo, hi) = (s.value_min as f64, s.value_max as f64);
+        let bins = PreintTable::suggested_bins(lo, hi, !ldb.header.info.voxel_type.is_float());
+        let empty = EmptinessTable::new(&tf, lo, hi, bins)?;
+        if empty.is_empty(lo, hi) {
+            continue; // nothing of it is visible: it costs nothing
+        }
+        if out.len() == parallax_common::config::MAX_LAYERS {
+            bail!(
+                "layer: more than {} layers are visible; the kernel combines at most that many with the volume",
+                parallax_common::config::MAX_LAYERS
+            );
+        }
+        out.push(ActiveLayer {
+            index: i,
+            spec: spec.clone(),
+            preint: PreintTable::new(&tf, lo, hi, bins)
+                .with_context(|| field("transfer_function", &spec.transfer_function))?,
+            empty,
+            fill: s.value_min,
+            db: Arc::new(ldb),
+        });
+    }
+    Ok(out)
+}
+
 pub struct Renderer {
     gpu: Gpu,
+    /// The registered layers drawn with the volume (shaders/shared/layers.wgsl).
+    layers: Vec<ActiveLayer>,
+    /// The scene's layers as last set (drawn or not), and the settings the
+    /// caches were made with (their budgets, when the drawn layers change).
+    specs: Vec<Layer>,
+    budgets: RenderConfig,
     raycaster: Raycaster,
     pool: BrickPool,
     loader: Loader,
@@ -114,42 +255,30 @@ impl Renderer {
         cfg: &RenderConfig,
         req: &crate::gpu::AdapterRequest,
     ) -> Result<Self> {
+        Self::with_layers(database, &[], cfg, req)
+    }
+
+    /// A renderer of a volume and its registered layers (a scene's
+    /// `[[layer]]`s; G10 §4), on the adapter `req` chooses. Layers that are
+    /// hidden, have no opacity or whose transfer function is empty over
+    /// their data are left out: nothing of them is read. The others must
+    /// lie on the volume's grid; their bricks share one CPU cache and one
+    /// GPU pool with it (each texel holding every layer's value), and one
+    /// traversal serves all.
+    pub fn with_layers(
+        database: &Path,
+        layers: &[Layer],
+        cfg: &RenderConfig,
+        req: &crate::gpu::AdapterRequest,
+    ) -> Result<Self> {
         let db = Arc::new(OctreeDb::open(database)?);
+        let specs = layers.to_vec();
+        let layers = active_layers(&db, layers)?;
+        if !layers.is_empty() {
+            cfg.check_layered("render")?;
+        }
         let gpu = Gpu::with_request(req)?;
-        let layout = *db.layout();
-        let float = db.encoding() != BrickEncoding::U8Range;
-        let filtering = match cfg.interpolation {
-            Interpolation::Hardware => Filtering::Hardware,
-            Interpolation::Exact => Filtering::Exact,
-        };
-        let raycaster = Raycaster::new(&gpu, float, filtering)?;
-        let side = layout.stored_side() as u32;
-        let budget = (cfg.gpu_cache_mb * (1 << 20) as f64) as u64;
-        let slots = BrickPool::slots_for_budget(budget, side, float)
-            .min(crate::index::MAX_INDEX_NODES as u32);
-        // Refining a node needs all its children in core and on the GPU at
-        // once (G08 §4): the smallest budgets that make progress hold the
-        // root and one set of eight children (or just the root, for a
-        // one-brick octree). Smaller ones are refused, with the figure.
-        let (min_slots, min_bricks) = if layout.levels > 1 { (9, 8) } else { (1, 1) };
-        if slots < min_slots {
-            let slot_mib = BrickPool::slot_bytes(side, float) as f64 / (1 << 20) as f64;
-            bail!(
-                "render.gpu_cache_mb = {}: too small: the GPU pool must hold {min_slots} bricks (the root and one set of children) to refine; the smallest that works is {:.2}",
-                cfg.gpu_cache_mb,
-                (min_slots as f64 * slot_mib * 100.0).ceil() / 100.0
-            );
-        }
-        let cpu_budget = (cfg.cpu_cache_mb * (1 << 20) as f64) as u64;
-        let brick_bytes = layout.stored_len() as u64 * 4;
-        if cpu_budget < min_bricks * brick_bytes {
-            let brick_mib = brick_bytes as f64 / (1 << 20) as f64;
-            bail!(
-                "render.cpu_cache_mb = {}: too small: the CPU cache must hold {min_bricks} bricks (one set of children) to refine; the smallest that works is {:.2}",
-                cfg.cpu_cache_mb,
-                (min_bricks as f64 * brick_mib * 100.0).ceil() / 100.0
-            );
-        }
+        let (raycaster, pool, loader) = caches(&gpu, &db, &layers, cfg)?;
         let variance_range = db
             .nodes
             .iter()
@@ -157,21 +286,11 @@ impl Renderer {
             .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), n| {
                 (lo.min(n.variance), hi.max(n.variance))
             });
-        let pool = BrickPool::new(&gpu, slots, side, float)?;
-        let loader = Loader::new(
-            db.clone(),
-            LoaderConfig {
-                cpu_budget_bytes: cpu_budget,
-                gpu_slots: slots,
-                upload_budget: cfg.upload_budget.max(1),
-                accuracy: cfg.accuracy,
-                use_feedback: cfg.visibility_feedback,
-                frustum_culling: true,
-                io_threads: 2,
-            },
-        );
         let reconstruct_on_gpu = gpu.info.device_type != wgpu::DeviceType::Cpu;
         Ok(Renderer {
+            layers,
+            specs,
+            budgets: cfg.clone(),
             gpu,
             raycaster,
             pool,
@@ -231,9 +350,10 @@ impl Renderer {
         let table = PreintTable::new(tf, lo, hi, bins)?;
         let empty = EmptinessTable::new(tf, lo, hi, bins)?;
         let empty_refraction = EmptinessTable::new(&tf.refraction_as_extinction(), lo, hi, bins)?;
+        let layer_tables: Vec<&PreintTable> = self.layers.iter().map(|l| &l.preint).collect();
         self.tf = Some(ActiveTf {
             version,
-            table: TfTable::new(&self.gpu, &table, tf),
+            table: TfTable::with_layers(&self.gpu, &table, tf, &layer_tables)?,
             preint: table,
             empty,
             empty_refraction,
@@ -446,6 +566,7 @@ impl Renderer {
                 refraction: cfg.refraction,
                 iso: cfg.mode == Mode::Iso,
                 enhancers: acting.iter().map(|t| t.enhancer()).collect(),
+                layers: self.layers.len() as u32,
             },
             gamma: if cfg.mode == Mode::Mimda {
                 cfg.gamma as f32
@@ -480,7 +601,105 @@ impl Renderer {
             }),
             tricubic: cfg.filter == Filter::Tricubic,
             preintegration: cfg.preintegration,
+            layers: self.layer_params(&ctx.placement),
         }
+    }
+
+    /// The registered layers' opacity and view-dependent opacity, its axis
+    /// turned into volume space (the ray directions' space).
+    fn layer_params(
+        &self,
+        placement: &Placement,
+    ) -> [crate::raycast::params::LayerParams; parallax_common::config::MAX_LAYERS] {
+        let mut out =
+            [crate::raycast::params::LayerParams::default(); parallax_common::config::MAX_LAYERS];
+        let rt = placement.rotation().transpose();
+        for (p, l) in out.iter_mut().zip(&self.layers) {
+            p.table[3] = l.spec.opacity as f32;
+            if let Some(v) = &l.spec.view_opacity {
+                let a = (rt * glam::DVec3::from(v.axis)).normalize();
+                let [from, to] = v.angles_deg.map(f64::to_radians);
+                let inv = if to != from {
+                    (1.0 / (to - from)) as f32
+                } else {
+                    f32::MAX
+                };
+                p.axis = [a.x as f32, a.y as f32, a.z as f32, 1.0];
+                p.angles = [from as f32, inv, 0.0, 0.0];
+            }
+        }
+        out
+    }
+
+    /// Sets the scene's registered layers' visibility and opacity (the
+    /// live page, scripts; in `[[layer]]` order, empty: as the scene file
+    /// says). An opacity change is the next frame's constant; a change of
+    /// which layers are drawn (shown or hidden, an opacity to or from 0)
+    /// remakes the caches, the pool and the tables for the new set (a
+    /// hidden layer costs nothing).
+    pub fn set_layer_controls(
+        &mut self,
+        controls: &[parallax_common::protocol::LayerControl],
+    ) -> Result<()> {
+        let specs: Vec<Layer> = match controls {
+            [] => self.specs.clone(),
+            c => {
+                if c.len() != self.specs.len() {
+                    bail!(
+                        "layers: {} controls for the scene's {} layers",
+                        c.len(),
+                        self.specs.len()
+                    );
+                }
+                self.specs
+                    .iter()
+                    .zip(c)
+                    .map(|(s, c)| Layer {
+                        visible: c.visible,
+                        opacity: c.opacity.clamp(0.0, 1.0),
+                        ..s.clone()
+                    })
+                    .collect()
+            }
+        };
+        let drawn = |l: &Layer| l.visible && l.opacity > 0.0;
+        let same_set = self
+            .specs
+            .iter()
+            .zip(&specs)
+            .all(|(a, b)| drawn(a) == drawn(b));
+        if same_set {
+            for l in &mut self.layers {
+                l.spec.opacity = specs[l.index].opacity;
+            }
+            self.specs = specs;
+            return Ok(());
+        }
+        let layers = active_layers(&self.db, &specs)?;
+        let (raycaster, pool, mut loader) = caches(&self.gpu, &self.db, &layers, &self.budgets)?;
+        loader.set_lightfield(self.loader.lightfield());
+        loader.set_frustum_culling(self.loader.config().frustum_culling);
+        self.layers = layers;
+        self.specs = specs;
+        self.raycaster = raycaster;
+        self.pool = pool;
+        self.loader = loader;
+        self.last.clear();
+        self.history.clear();
+        self.history_key = None;
+        self.prediction = None;
+        self.cells_stale = true;
+        if let Some(tf) = self.tf.take() {
+            self.set_transfer_function(tf.version, &tf.function)?;
+        }
+        Ok(())
+    }
+
+    /// How many of the scene's registered layers this renderer draws (the
+    /// others are hidden, without opacity, or empty under their transfer
+    /// function).
+    pub fn layer_count(&self) -> usize {
+        self.layers.len()
     }
 
     /// ∇_max of the probe's η (G10 Eq. 5): the transfer function's value
@@ -519,6 +738,9 @@ impl Renderer {
         cfg: &RenderConfig,
     ) -> Result<Frame> {
         let start = Instant::now();
+        if !self.layers.is_empty() {
+            cfg.check_layered("render")?;
+        }
         if let Some(tf) = self.tf.as_mut() {
             if tf.table.wants_grid(cfg.preintegration) {
                 tf.table.build_grid(&self.gpu, &tf.preint);
@@ -717,6 +939,10 @@ impl Renderer {
             .as_ref()
             .context("render: no transfer function set")?;
         let (v_lo, v_hi) = self.variance_range;
+        let layered = !self.layers.is_empty();
+        let fills: Vec<f32> = std::iter::once(self.db.summary.value_min)
+            .chain(self.layers.iter().map(|l| l.fill))
+            .collect();
         for u in &cut.uploads {
             let v = self.db.node(u.key).map_or(0.0, |n| n.variance);
             let norm = if v_hi > v_lo {
@@ -724,6 +950,13 @@ impl Renderer {
             } else {
                 0.0
             };
+            if layered {
+                // Macrocells are not marked in a layered pool (the kernel
+                // marches every cell).
+                self.pool
+                    .upload_layered(&self.gpu, u.slot, &u.data, &fills, norm);
+                continue;
+            }
             self.pool.upload(
                 &self.gpu,
                 u.slot,
@@ -739,7 +972,7 @@ impl Renderer {
         }
         // A scene without macrocells pays nothing for them but the ranges
         // taken at upload; switched on, every resident brick is marked.
-        if !cfg.macrocells {
+        if !cfg.macrocells || layered {
             self.cells_stale = true;
         } else if std::mem::take(&mut self.cells_stale) {
             self.pool.mark_all_cells(&|lo, hi| {

@@ -790,6 +790,7 @@ fn every_shipped_scene_loads() {
             refraction: s.render.refraction,
             iso: s.render.mode == Mode::Iso,
             enhancers: s.tools.iter().map(Tool::enhancer).collect(),
+            layers: s.layers.len() as u32,
         };
         assert!(all.contains(&key), "{}: {key:?}", p.display());
         n += 1;

@@ -14,7 +14,8 @@
 //!   (B10 §4) against full rendering along an interaction script;
 //! - [`anisotropy`]: the level of detail on thick slices;
 //! - [`seams`]: steps at level changes, one level per brick against
-//!   multilevel sampling (G10 §4).
+//!   multilevel sampling (G10 §4);
+//! - [`layers`]: what registered layers cost against the volume alone.
 //!
 //! [`measure`] holds what they share: the precise base settings, the
 //! converge-then-time helper and the CSV writer.
@@ -22,6 +23,7 @@
 pub mod anisotropy;
 pub mod codecs;
 pub mod kernels;
+pub mod layers;
 pub mod measure;
 mod plot;
 pub mod seams;

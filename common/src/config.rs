@@ -227,6 +227,29 @@ fn yes() -> bool {
     true
 }
 
+impl RenderConfig {
+    /// What a scene with `[[layer]]`s cannot use yet: the layers are
+    /// combined in the DVR kernel's trilinear, single-level sampling.
+    pub fn check_layered(&self, file: &str) -> Result<()> {
+        let refuse = |field: &str, what: &str| -> Result<()> {
+            bail!("{file}: {field}: {what} is not available with [[layer]]s yet (plain DVR only)")
+        };
+        if self.mode != Mode::Dvr {
+            refuse("render.mode", "MImDA and isosurfaces")?;
+        }
+        if self.refraction {
+            refuse("render.refraction", "refraction")?;
+        }
+        if self.multilevel {
+            refuse("render.multilevel", "multilevel sampling")?;
+        }
+        if self.filter == Filter::Tricubic {
+            refuse("render.filter", "tricubic filtering")?;
+        }
+        Ok(())
+    }
+}
+
 impl Default for RenderConfig {
     fn default() -> Self {
         toml::from_str("").unwrap()
@@ -252,6 +275,110 @@ pub struct Scene {
     /// `[[tool]]` tables: the tools, each driving one enhancer (G10 §4).
     #[serde(default, rename = "tool", with = "crate::tools::list")]
     pub tools: Vec<crate::tools::Tool>,
+    /// `[[layer]]` tables: volumes registered to `volume`, each with its
+    /// own transfer function, combined with it as media (G10 §4).
+    #[serde(default, rename = "layer")]
+    pub layers: Vec<Layer>,
+}
+
+/// The most `[[layer]]`s a scene may add to its volume: the kernel reads
+/// the volume and its layers as the four channels of one brick pool.
+pub const MAX_LAYERS: usize = 3;
+
+/// `[[layer]]` of a scene: a volume on the scene volume's grid (the same
+/// dimensions, brick size and spacing), drawn through its own transfer
+/// function. Where layers overlap their extinctions and extinction-weighted
+/// emissions add: the exact integral of the summed medium.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Layer {
+    /// The layer's octree database (relative to the scene file).
+    #[serde(with = "crate::paths::bytes")]
+    pub volume: PathBuf,
+    /// Its transfer function file (relative to the scene file).
+    #[serde(with = "crate::paths::bytes")]
+    pub transfer_function: PathBuf,
+    /// Scales the layer's extinction and emission, in [0, 1].
+    #[serde(default = "one")]
+    pub opacity: f64,
+    /// Off: the layer is left out (nothing of it is loaded).
+    #[serde(default = "yes")]
+    pub visible: bool,
+    /// The layer's opacity as a function of the view direction (G10 §4).
+    #[serde(default)]
+    pub view_opacity: Option<ViewOpacity>,
+}
+
+/// View-dependent layer opacity (G10 §4: "adaptively showing different
+/// registered layers of information by controlling a layer's opacity as a
+/// function of the view direction"): with θ the angle between a ray's
+/// direction and `axis` (display space), the layer's opacity is scaled by
+/// smoothstep from `angles_deg[0]` to `angles_deg[1]` of θ (falling where
+/// the first is the larger), so that viewers on one side of a display see
+/// the layer and those on the other side do not.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViewOpacity {
+    pub axis: [f64; 3],
+    pub angles_deg: [f64; 2],
+}
+
+impl ViewOpacity {
+    /// The factor for a ray at angle `theta_deg` to the axis.
+    pub fn factor(&self, theta_deg: f64) -> f64 {
+        let [a, b] = self.angles_deg;
+        let t = if a == b {
+            if theta_deg >= a {
+                1.0
+            } else {
+                0.0
+            }
+        } else {
+            ((theta_deg - a) / (b - a)).clamp(0.0, 1.0)
+        };
+        t * t * (3.0 - 2.0 * t)
+    }
+}
+
+/// Checks a scene's `[[layer]]`s: their number, opacity, view opacity, and
+/// their transfer functions (the databases are opened, and their grids
+/// checked, by the back ends).
+fn check_layers(file: &Path, layers: &[Layer]) -> Result<()> {
+    let f = file.display();
+    if layers.len() > MAX_LAYERS {
+        bail!(
+            "{f}: layer: {} layers; the kernel combines at most {MAX_LAYERS} with the scene's volume",
+            layers.len()
+        );
+    }
+    for (i, l) in layers.iter().enumerate() {
+        crate::tf::TransferFunction::load(&l.transfer_function)
+            .with_context(|| format!("{f}: layer[{i}].transfer_function"))?;
+        if !(0.0..=1.0).contains(&l.opacity) {
+            bail!(
+                "{f}: layer[{i}].opacity must be in [0, 1] (got {})",
+                l.opacity
+            );
+        }
+        if let Some(v) = &l.view_opacity {
+            finite(file, &format!("layer[{i}].view_opacity.axis"), &v.axis)?;
+            let n = v.axis.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if n <= 1e-9 {
+                bail!("{f}: layer[{i}].view_opacity.axis must not be zero");
+            }
+            if !v
+                .angles_deg
+                .iter()
+                .all(|a| a.is_finite() && (0.0..=180.0).contains(a))
+            {
+                bail!(
+                    "{f}: layer[{i}].view_opacity.angles_deg must be two angles in [0, 180] (got {:?})",
+                    v.angles_deg
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 impl Scene {
@@ -261,6 +388,10 @@ impl Scene {
         s.volume = resolve(path, &s.volume);
         s.transfer_function = resolve(path, &s.transfer_function);
         s.display = s.display.map(|d| resolve(path, &d));
+        for l in &mut s.layers {
+            l.volume = resolve(path, &l.volume);
+            l.transfer_function = resolve(path, &l.transfer_function);
+        }
         finite(f, "placement.center", &s.placement.center)?;
         finite(f, "placement.rotation_deg", &s.placement.rotation_deg)?;
         let r = &s.render;
@@ -365,6 +496,10 @@ impl Scene {
             );
         }
         crate::tools::check_tools(&s.tools, f)?;
+        check_layers(f, &s.layers)?;
+        if !s.layers.is_empty() {
+            r.check_layered(&f.display().to_string())?;
+        }
         r.overlay.check(&f.display().to_string(), r.refraction)?;
         Ok(s)
     }
@@ -733,5 +868,64 @@ mod tests {
         std::fs::remove_dir_all(d.path().join("p")).unwrap();
         let e = format!("{:#}", Display::load(&disp).unwrap_err());
         assert!(e.contains("d.toml") && e.contains("projectors"), "{e}");
+    }
+
+    /// `[[layer]]`s resolve against the scene file; too many, a missing
+    /// file, a bad opacity or view opacity, and a render mode the layers do
+    /// not take are refused naming the scene file and the field.
+    #[test]
+    fn layers_load_and_bad_ones_name_the_field() {
+        let d = tempfile::tempdir().unwrap();
+        write(d.path(), "l.pxo", "");
+        write(
+            d.path(),
+            "tf.toml",
+            "[[point]]\nvalue = 0\ncolor = [1, 1, 1]\nextinction = 1\n",
+        );
+        let head = "volume = \"v\"\ntransfer_function = \"tf.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 1\n";
+        let layer = "[[layer]]\nvolume = \"l.pxo\"\ntransfer_function = \"tf.toml\"\n";
+        let good = write(
+            d.path(),
+            "s.toml",
+            &format!("{head}{layer}view_opacity = {{ axis = [0, 0, 1], angles_deg = [30, 60] }}\n"),
+        );
+        let s = Scene::load(&good).unwrap();
+        assert_eq!(s.layers.len(), 1);
+        assert_eq!(s.layers[0].volume, d.path().join("l.pxo"));
+        assert_eq!(s.layers[0].opacity, 1.0);
+        let v = s.layers[0].view_opacity.unwrap();
+        assert_eq!(
+            (v.factor(20.0), v.factor(45.0), v.factor(90.0)),
+            (0.0, 0.5, 1.0)
+        );
+        let cases = [
+            (layer.repeat(4), "layer: 4 layers"),
+            (
+                layer.replace("\"tf.toml", "\"none.toml"),
+                "layer[0].transfer_function",
+            ),
+            (format!("{layer}opacity = 2\n"), "layer[0].opacity"),
+            (
+                format!("{layer}view_opacity = {{ axis = [0, 0, 0], angles_deg = [0, 1] }}\n"),
+                "layer[0].view_opacity.axis",
+            ),
+            (
+                format!("{layer}view_opacity = {{ axis = [0, 0, 1], angles_deg = [0, 200] }}\n"),
+                "layer[0].view_opacity.angles_deg",
+            ),
+            (
+                format!("[render]\nmode = \"mimda\"\ngamma = 0.5\n{layer}"),
+                "render.mode",
+            ),
+            (
+                format!("[render]\nmultilevel = true\n{layer}"),
+                "render.multilevel",
+            ),
+        ];
+        for (text, field) in cases {
+            let p = write(d.path(), "bad.toml", &format!("{head}{text}"));
+            let e = format!("{:#}", Scene::load(&p).unwrap_err());
+            assert!(e.contains("bad.toml") && e.contains(field), "{field}: {e}");
+        }
     }
 }

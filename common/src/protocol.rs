@@ -45,6 +45,27 @@ pub struct FrameState {
     /// (`FrameStats::grown`).
     #[serde(default)]
     pub grow: Option<f64>,
+    /// The scene's registered layers as the live page or a script set
+    /// them, in `[[layer]]` order; empty: as the scene file says.
+    #[serde(default)]
+    pub layers: Vec<LayerControl>,
+}
+
+/// What the live page and scripts change of a registered layer
+/// (`[[layer]]`): whether it is drawn, and its opacity in [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LayerControl {
+    pub visible: bool,
+    pub opacity: f64,
+}
+
+impl From<&crate::config::Layer> for LayerControl {
+    fn from(l: &crate::config::Layer) -> Self {
+        LayerControl {
+            visible: l.visible,
+            opacity: l.opacity,
+        }
+    }
 }
 
 /// One streamed projector image: sRGB 8-bit RGB rows, top row first, the
@@ -449,6 +470,7 @@ mod tests {
             stream: Vec::new(),
             pick: None,
             grow: None,
+            layers: Vec::new(),
         };
         let msg = ToBackend::Frame(s.clone());
         let b = encode(&msg).unwrap();
@@ -538,6 +560,7 @@ mod tests {
             stream: Vec::new(),
             pick: None,
             grow: None,
+            layers: Vec::new(),
         };
         t.broadcast(&ToBackend::Frame(f)).unwrap();
         let stats = t.gather().unwrap();

@@ -138,7 +138,8 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             sync_io: opts.sync_io,
             present: opts.present.is_some(),
         },
-    )?;
+    )
+    .with_context(|| opts.scene.display().to_string())?;
     transport.broadcast(&ToBackend::TransferFunction { version: 1, tf })?;
     transport.broadcast(&ToBackend::Tools {
         version: 1,
@@ -171,6 +172,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             stream: Vec::new(),
             pick: None,
             grow: None,
+            layers: Vec::new(),
         };
         if let Some(sc) = &script {
             sent.script(sc, &scene, &display, &mut state, transport)?;
@@ -269,6 +271,7 @@ impl Sent {
         state.render.overlay.show = sc.overlay(frame, scene.render.overlay.show);
         state.render.accuracy = sc.accuracy(frame, scene.render.accuracy);
         state.render.step_factor = sc.step_factor(frame, scene.render.step_factor);
+        state.layers = sc.layers(frame);
         // Tools are sent when they change, not every frame.
         let now = sc.tools(frame, &scene.tools)?;
         if now != self.tools {

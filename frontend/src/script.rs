@@ -109,6 +109,10 @@ pub struct Key {
     /// frame on).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub overlay: Option<bool>,
+    /// The scene's registered layers from this frame on: each one's
+    /// `visible` and `opacity`, in `[[layer]]` order.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub layers: Option<Vec<parallax_common::protocol::LayerControl>>,
 }
 
 /// A tool set as a script writes it.
@@ -205,6 +209,8 @@ pub struct Script {
     cursor: Track<[f64; 3]>,
     /// (first frame, on) of each overlay switch.
     overlay: Vec<(u64, bool)>,
+    /// (first frame, controls) of each change of the layers.
+    layers: Vec<(u64, Vec<parallax_common::protocol::LayerControl>)>,
     /// (first frame, file) of each transfer function switch.
     tfs: Vec<(u64, PathBuf)>,
     /// Per tool index of the scene (or of the tool set in force).
@@ -246,6 +252,7 @@ impl Script {
             step_factor: Track::default(),
             cursor: Track::default(),
             overlay: Vec::new(),
+            layers: Vec::new(),
             tfs: Vec::new(),
             tools: Vec::new(),
             tool_sets: Vec::new(),
@@ -297,6 +304,15 @@ impl Script {
                     bail!("{at}: cursor must be finite and within 10 m (got {c:?})");
                 }
                 s.cursor.keys.push((k.frame, c));
+            }
+            if let Some(l) = &k.layers {
+                if let Some(c) = l.iter().find(|c| !(0.0..=1.0).contains(&c.opacity)) {
+                    bail!(
+                        "{at}: layers: opacity must be in [0, 1] (got {})",
+                        c.opacity
+                    );
+                }
+                s.layers.push((k.frame, l.clone()));
             }
             if let Some(on) = k.overlay {
                 s.overlay.push((k.frame, on));
@@ -379,6 +395,15 @@ impl Script {
             .rev()
             .find(|(f, _)| *f <= frame)
             .map_or(scene, |(_, on)| *on)
+    }
+
+    /// The registered layers' controls at `frame` (empty: the scene's).
+    pub fn layers(&self, frame: u64) -> Vec<parallax_common::protocol::LayerControl> {
+        self.layers
+            .iter()
+            .rev()
+            .find(|(f, _)| *f <= frame)
+            .map_or_else(Vec::new, |(_, l)| l.clone())
     }
 
     pub fn gamma(&self, frame: u64, scene: f64) -> f64 {

@@ -125,6 +125,17 @@ struct TfPieces {
 @group(0) @binding(14) var<uniform> tf_pieces_uniform: TfPieces;
 var<private> tf_pieces: TfPieces;
 
+// Registered layers (shared/layers.wgsl): each layer's table in `tf_table`,
+// opacity and view-dependent opacity (Rust mirror: `LayerParams`,
+// backend/src/raycast/params.rs).
+struct LayerParams {
+    table: vec4<f32>,   // vmin, 1 / bin width, bins, opacity
+    at: vec4<u32>,      // first entry, the bin midpoints' first entry, the running integral's first entry (0: none), pyramid levels
+    axis: vec4<f32>,    // view-dependent opacity: its axis (volume space, unit); w: 1 where it has one
+    angles: vec4<f32>,  // its angles (radians): from, 1 / (to − from), 0, 0
+}
+@group(0) @binding(15) var<uniform> layer_uniform: array<LayerParams, 3>;
+
 fn load_constants() {
     frame = frame_uniform;
     tools = tool_uniform;

@@ -142,6 +142,27 @@ fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
     return leaf.range.x + leaf.range.y * v;
 }
 
+// The volume's and its registered layers' values at p (LAYERS > 0: a float
+// pool of two or four channels, no no-data voxels), every channel of a
+// texel interpolated at once, by the texture unit or by eight loads.
+fn sample_layered(leaf: Leaf, p: vec3<f32>) -> vec4<f32> {
+    let side = f32(frame.pool.w);
+    let local = clamp(p * leaf.to_local + leaf.shift, vec3<f32>(0.0), vec3<f32>(side - 1.0));
+    let o = leaf.origin;
+    if (HW_FILTER) {
+        return textureSampleLevel(pool, pool_sampler, (vec3<f32>(o) + local + 0.5) * frame.recip.xyz, 0.0);
+    }
+    let f0 = floor(local);
+    let w = local - f0;
+    let i0 = vec3<i32>(f0);
+    let i1 = min(i0 + vec3<i32>(1), vec3<i32>(i32(frame.pool.w) - 1));
+    let c00 = mix(textureLoad(pool, o + i0, 0), textureLoad(pool, o + vec3<i32>(i1.x, i0.y, i0.z), 0), w.x);
+    let c10 = mix(textureLoad(pool, o + vec3<i32>(i0.x, i1.y, i0.z), 0), textureLoad(pool, o + vec3<i32>(i1.x, i1.y, i0.z), 0), w.x);
+    let c01 = mix(textureLoad(pool, o + vec3<i32>(i0.x, i0.y, i1.z), 0), textureLoad(pool, o + vec3<i32>(i1.x, i0.y, i1.z), 0), w.x);
+    let c11 = mix(textureLoad(pool, o + vec3<i32>(i0.x, i1.y, i1.z), 0), textureLoad(pool, o + i1, 0), w.x);
+    return mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+}
+
 // One axis of the gradient where samples may lack data: central where both
 // neighbours have data, one-sided against the centre where one has, 0 else.
 fn partial(a: f32, b: f32, c: f32, h: f32) -> f32 {

@@ -123,6 +123,26 @@ enum Study {
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
     },
+    /// What registered layers cost against the volume alone: one and two
+    /// aligned layers (the volume again, the extinction shared so that the
+    /// image stays the volume's) and an empty layer, at the default
+    /// settings (DIR/layers.csv).
+    Layers {
+        /// A volume file.
+        #[arg(long, default_value = "/usr/share/mricron/templates/ch2.nii.gz")]
+        volume: PathBuf,
+        /// Transfer function file.
+        #[arg(long, default_value = "configs/tf/colin27-brain.toml")]
+        tf: PathBuf,
+        /// Image size WxH.
+        #[arg(long, default_value = "512x384", value_parser = args::size::<u32>)]
+        size: [u32; 2],
+        /// Timed rounds (the median is reported).
+        #[arg(long, default_value_t = 7)]
+        rounds: usize,
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+    },
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -177,20 +197,54 @@ pub fn run(a: Args) -> Result<()> {
             parallax_bench::seams::run_seams(&out)?;
             wrote(&out, "seams.csv")
         }
+        Study::Layers {
+            volume,
+            tf,
+            size,
+            rounds,
+            out,
+        } => layers(&volume, &tf, size, rounds, &out),
     }
 }
 
-fn tools(volume: &Path, tfs: &[PathBuf], size: [u32; 2], rounds: usize, out: &Path) -> Result<()> {
+fn layers(volume: &Path, tf: &Path, size: [u32; 2], rounds: usize, out: &Path) -> Result<()> {
+    let (db, placement, view) = desktop_shot(volume, size, out, "layers.pxo")?;
+    let tf = parallax_common::tf::TransferFunction::load(tf)?;
+    let shot = parallax_bench::measure::Shot {
+        db: &db,
+        tf: &tf,
+        placement: &placement,
+        view: &view,
+    };
+    let cfg = parallax_common::config::RenderConfig::default();
+    let p = parallax_bench::layers::run(shot, &cfg, rounds, out)?;
+    parallax_bench::layers::print(&p);
+    parallax_bench::layers::write_csv(&out.join("layers.csv"), &p)?;
+    wrote(out, "layers.csv")
+}
+
+/// `volume` imported into `out/name`, placed upright, face to the viewer,
+/// 25 cm tall, and a desktop window of `size` pixels onto it (Colin27's
+/// desktop view).
+fn desktop_shot(
+    volume: &Path,
+    size: [u32; 2],
+    out: &Path,
+    name: &str,
+) -> Result<(
+    PathBuf,
+    parallax_common::camera::Placement,
+    parallax_common::camera::View,
+)> {
     use parallax_common::camera::{Placement, View};
     parallax_bench::measure::create_out(out)?;
-    let db = out.join("tools.pxo");
+    let db = out.join(name);
     parallax_backend::store::import(
         data::open(volume, None)?.as_mut(),
         &db,
         &volume.display().to_string(),
         &Default::default(),
     )?;
-    // Colin27 upright, face to the viewer, 25 cm tall, on a desktop window.
     let placement = Placement {
         center: [0.0; 3],
         rotation_deg: [-90.0, 180.0, 0.0],
@@ -198,6 +252,11 @@ fn tools(volume: &Path, tfs: &[PathBuf], size: [u32; 2], rounds: usize, out: &Pa
     };
     let aspect = size[1] as f64 / size[0] as f64;
     let view = View::window(size, [0.3, 0.3 * aspect], [0.0, 0.0, 0.8]);
+    Ok((db, placement, view))
+}
+
+fn tools(volume: &Path, tfs: &[PathBuf], size: [u32; 2], rounds: usize, out: &Path) -> Result<()> {
+    let (db, placement, view) = desktop_shot(volume, size, out, "tools.pxo")?;
     let cfg = parallax_common::config::RenderConfig::default();
     let mut points = Vec::new();
     for tf_path in tfs {

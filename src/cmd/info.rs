@@ -1,21 +1,48 @@
 //! `parallax info`: what a database holds; `--verify` checks every brick.
+//! Given a scene file, its volume and each of its registered layers.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use parallax_backend::store::{info, OctreeDb};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-/// Describe a database; --verify decodes and checks every brick.
+/// Describe a database (or a scene's volume and layers); --verify decodes
+/// and checks every brick.
 #[derive(clap::Args)]
 pub struct Args {
+    /// A `.pxo` database, or a scene file (`.toml`).
     database: PathBuf,
     #[arg(long)]
     verify: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let db = OctreeDb::open(&a.database)?;
+    if a.database.extension().is_some_and(|e| e == "toml") {
+        let scene = parallax_common::config::Scene::load(&a.database)?;
+        println!("scene:         {}", a.database.display());
+        describe(&scene.volume, a.verify)?;
+        for (i, l) in scene.layers.iter().enumerate() {
+            println!();
+            println!(
+                "layer[{i}]:      transfer function {}, opacity {}{}{}",
+                l.transfer_function.display(),
+                l.opacity,
+                if l.visible { "" } else { ", hidden" },
+                l.view_opacity.map_or(String::new(), |v| format!(
+                    ", view opacity about {:?} from {}° to {}°",
+                    v.axis, v.angles_deg[0], v.angles_deg[1]
+                ))
+            );
+            describe(&l.volume, a.verify).with_context(|| format!("layer[{i}].volume"))?;
+        }
+        return Ok(());
+    }
+    describe(&a.database, a.verify)
+}
+
+fn describe(path: &Path, verify: bool) -> Result<()> {
+    let db = OctreeDb::open(path)?;
     print!("{}", info::describe(&db));
-    if a.verify {
+    if verify {
         let r = info::verify(&db)?;
         println!(
             "verify:        ok, {} bricks ({} bytes) decoded and checked",

@@ -48,7 +48,12 @@ pub fn run(a: Args) -> Result<()> {
         rows,
         tile,
     );
-    let mut r = parallax_backend::render::Renderer::new(&sc.volume, &sc.render)?;
+    let mut r = parallax_backend::render::Renderer::with_layers(
+        &sc.volume,
+        &sc.layers,
+        &sc.render,
+        &parallax_backend::gpu::AdapterRequest::from_env(None, 0),
+    )?;
     r.set_transfer_function(1, &tf)?;
     let f = r.converge(&sc.placement, &views, &sc.render, 64)?;
     let img = quilt::assemble(cols, rows, tile, &f.images)?;

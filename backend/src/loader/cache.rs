@@ -192,6 +192,7 @@ mod tests {
         Arc::new(Brick {
             values: vec![v; n],
             cells: None,
+            layered: None,
         })
     }
 

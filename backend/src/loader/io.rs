@@ -8,7 +8,8 @@
 //! at a time and sends the result back on a channel, which the loader drains
 //! without blocking at the start of the next frame.
 
-use crate::store::{Brick, NodeKey, OctreeDb};
+use crate::store::{Brick, LayerBricks, NodeKey, OctreeDb};
+use parallax_common::tf::EmptinessTable;
 use std::collections::VecDeque;
 use std::sync::mpsc::{self, Receiver, RecvError, Sender, TryRecvError};
 use std::sync::{Arc, Condvar, Mutex};
@@ -18,7 +19,8 @@ use std::thread::JoinHandle;
 /// ranges (`None` when the node is not stored), or the error, as text.
 pub(crate) struct Landed {
     pub key: NodeKey,
-    pub result: Result<Option<Brick>, String>,
+    /// The brick, and the bytes read from the databases for it.
+    pub result: Result<(Option<Brick>, u64), String>,
 }
 
 struct Queue {
@@ -38,7 +40,9 @@ pub(crate) struct IoPool {
 }
 
 impl IoPool {
-    pub fn new(db: Arc<OctreeDb>, threads: usize) -> Self {
+    /// Threads reading `sources`: the scene volume, then its registered
+    /// layers (each with its emptiness under its transfer function).
+    pub fn new(sources: Arc<Vec<Source>>, threads: usize) -> Self {
         let shared = Arc::new(Shared {
             queue: Mutex::new(Queue {
                 jobs: VecDeque::new(),
@@ -49,10 +53,10 @@ impl IoPool {
         let (tx, results) = mpsc::channel();
         let threads = (0..threads.max(1))
             .map(|i| {
-                let (db, shared, tx) = (db.clone(), shared.clone(), tx.clone());
+                let (sources, shared, tx) = (sources.clone(), shared.clone(), tx.clone());
                 std::thread::Builder::new()
                     .name(format!("parallax-io-{i}"))
-                    .spawn(move || worker(&db, &shared, &tx))
+                    .spawn(move || worker(&sources, &shared, &tx))
                     .expect("cannot spawn a loader I/O thread")
             })
             .collect();
@@ -101,7 +105,65 @@ impl Drop for IoPool {
     }
 }
 
-fn worker(db: &OctreeDb, shared: &Shared, tx: &Sender<Landed>) {
+/// A database the loader reads: the scene volume (first), or a registered
+/// layer, whose bricks empty under its transfer function are never read.
+pub(crate) struct Source {
+    pub db: Arc<OctreeDb>,
+    pub empty: Option<EmptinessTable>,
+}
+
+/// One node's brick: the scene volume's alone, or, with registered layers,
+/// with theirs (those the layer stores and its transfer function does not
+/// leave empty), and the bytes read for it. `None` when no database stores
+/// the node.
+pub(crate) fn read_node(sources: &[Source], key: NodeKey) -> anyhow::Result<(Option<Brick>, u64)> {
+    let stored = |db: &OctreeDb| {
+        db.node(key)
+            .filter(|r| r.is_stored())
+            .map_or(0, |r| r.len as u64)
+    };
+    let main = sources[0].db.read_brick_cells(key)?;
+    let mut bytes = stored(&sources[0].db);
+    if sources.len() == 1 {
+        return Ok((main, bytes));
+    }
+    let mut layers = Vec::with_capacity(sources.len() - 1);
+    for s in &sources[1..] {
+        let wanted = s.db.node(key).is_some_and(|r| {
+            r.is_stored()
+                && !s
+                    .empty
+                    .as_ref()
+                    .is_some_and(|e| e.is_empty(r.min as f64, r.max as f64))
+        });
+        layers.push(match wanted {
+            true => {
+                bytes += stored(&s.db);
+                s.db.read_brick_cells(key)?.map(|b| b.values)
+            }
+            false => None,
+        });
+    }
+    if main.is_none() && layers.iter().all(Option::is_none) {
+        return Ok((None, bytes));
+    }
+    let n = sources[0].db.layout().stored_len();
+    let (values, cells, has_main) = match main {
+        Some(b) => (b.values, b.cells, true),
+        None => (vec![0.0; n], None, false),
+    };
+    let brick = Brick {
+        values,
+        cells,
+        layered: Some(LayerBricks {
+            main: has_main,
+            layers,
+        }),
+    };
+    Ok((Some(brick), bytes))
+}
+
+fn worker(sources: &[Source], shared: &Shared, tx: &Sender<Landed>) {
     loop {
         let key = {
             let mut q = shared.queue.lock().unwrap_or_else(|e| e.into_inner());
@@ -118,13 +180,13 @@ fn worker(db: &OctreeDb, shared: &Shared, tx: &Sender<Landed>) {
         // A failing brick is reported, never fatal (not even a panic in the
         // decoder).
         let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            db.read_brick_cells(key)
+            read_node(sources, key)
         })) {
             Ok(Ok(v)) => Ok(v),
             Ok(Err(e)) => Err(format!("{e:#}")),
             Err(_) => Err(format!(
                 "{}: brick {key}: the reader panicked",
-                db.path().display()
+                sources[0].db.path().display()
             )),
         };
         if tx.send(Landed { key, result }).is_err() {

@@ -37,9 +37,10 @@ use cache::{ByteLru, SlotPool};
 use feedback::Visibility;
 use geometry::FrameGeometry;
 pub use geometry::LightField;
-use io::{IoPool, Landed};
+use io::{IoPool, Landed, Source};
 use parallax_common::camera::{Placement, View};
 use parallax_common::protocol::HeldBack;
+use parallax_common::tf::EmptinessTable;
 use ranges::SubtreeRanges;
 use serde::Serialize;
 use std::collections::{BTreeSet, BinaryHeap, HashMap, HashSet, VecDeque};
@@ -211,9 +212,14 @@ struct Build {
 /// and one cut for all of the process's views (G10 §5).
 pub struct Loader {
     db: Arc<OctreeDb>,
+    /// The scene volume's database, then its registered layers' (one
+    /// traversal serves all: their octrees align).
+    sources: Arc<Vec<Source>>,
     cfg: LoaderConfig,
     geom: Geometry,
     ranges: SubtreeRanges,
+    /// The layers' subtree ranges, in `sources` order after the volume.
+    layer_ranges: Vec<SubtreeRanges>,
     l2: ByteLru,
     gpu: SlotPool,
     io: IoPool,
@@ -248,14 +254,43 @@ impl Loader {
 
     /// Starts the loader and its I/O threads over an open database.
     pub fn new(db: Arc<OctreeDb>, cfg: LoaderConfig) -> Self {
+        Self::with_layers(db, Vec::new(), cfg)
+    }
+
+    /// A loader over a scene volume and its registered layers: databases of
+    /// the same octree, each layer with its transfer function's emptiness
+    /// (fixed for the loader's life). A node needs a GPU slot where any of
+    /// them has data there that is not empty; it is read with every layer
+    /// that has (never a layer's empty brick), and takes one slot.
+    pub fn with_layers(
+        db: Arc<OctreeDb>,
+        layers: Vec<(Arc<OctreeDb>, EmptinessTable)>,
+        cfg: LoaderConfig,
+    ) -> Self {
         let layout = *db.layout();
         let geom = Geometry::new(layout, db.header.info.spacing);
         let ranges = SubtreeRanges::new(&db);
-        let brick_bytes = (layout.stored_len() * std::mem::size_of::<f32>()) as u64;
+        let layer_ranges = layers.iter().map(|(d, _)| SubtreeRanges::new(d)).collect();
+        let channels = 1 + layers.len() as u64;
+        let brick_bytes = (layout.stored_len() * std::mem::size_of::<f32>()) as u64 * channels;
         let l2_bricks = (cfg.cpu_budget_bytes / brick_bytes.max(1)).min(usize::MAX as u64) as usize;
         let slots = cfg.gpu_slots.min(NO_SLOT);
-        let io = IoPool::new(db.clone(), cfg.io_threads.max(1));
+        let sources = Arc::new(
+            std::iter::once(Source {
+                db: db.clone(),
+                empty: None,
+            })
+            .chain(
+                layers
+                    .into_iter()
+                    .map(|(db, e)| Source { db, empty: Some(e) }),
+            )
+            .collect::<Vec<_>>(),
+        );
+        let io = IoPool::new(sources.clone(), cfg.io_threads.max(1));
         Loader {
+            sources,
+            layer_ranges,
             l2: ByteLru::new(cfg.cpu_budget_bytes),
             gpu: SlotPool::new(slots),
             io,
@@ -460,11 +495,11 @@ impl Loader {
     fn land(&mut self, l: Landed) {
         self.in_flight.remove(&l.key);
         match l.result {
-            Ok(Some(brick)) => {
-                self.bytes_read += self.db.node(l.key).map_or(0, |r| r.len as u64);
+            Ok((Some(brick), bytes)) => {
+                self.bytes_read += bytes;
                 self.l2.insert(l.key, Arc::new(brick));
             }
-            Ok(None) => {}
+            Ok((None, _)) => {}
             Err(e) => {
                 self.failed.insert(l.key);
                 self.errors.push(e);
@@ -479,12 +514,26 @@ impl Loader {
             None => true,
         };
         let (min, max) = rec.map_or((0.0, 0.0), |r| (r.min, r.max));
-        NodeClass {
+        let mut c = NodeClass {
             min,
             max,
             culled_empty,
             needs_data: !culled_empty && rec.is_some_and(|r| r.is_stored() && !empty(r.min, r.max)),
+        };
+        // Registered layers: the node is empty where every layer is, and
+        // needs data where any has some (`io::read_node` reads those).
+        for (s, ranges) in self.sources[1..].iter().zip(&self.layer_ranges) {
+            let Some(e) = &s.empty else { continue };
+            let culled = ranges
+                .get(key)
+                .is_none_or(|(lo, hi)| e.is_empty(lo as f64, hi as f64));
+            c.culled_empty &= culled;
+            c.needs_data |= !culled
+                && s.db
+                    .node(key)
+                    .is_some_and(|r| r.is_stored() && !e.is_empty(r.min as f64, r.max as f64));
         }
+        c
     }
 
     /// The root's slot, uploading it from the CPU cache or requesting it.
@@ -755,6 +804,7 @@ mod tests {
                 Arc::new(Brick {
                     values: vec![100.0; side],
                     cells: None,
+                    layered: None,
                 }),
             );
         }

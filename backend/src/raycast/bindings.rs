@@ -23,10 +23,11 @@ pub(super) const COUNTERS: u32 = 11;
 pub(super) const PREINT_GRID: u32 = 12;
 pub(super) const GRID_SAMPLER: u32 = 13;
 pub(super) const TF_PIECES_UNIFORM: u32 = 14;
+pub(super) const LAYER_UNIFORM: u32 = 15;
 
 /// Every binding with its WGSL name.
 #[cfg(test)]
-pub(super) const NAMED: [(&str, u32); 14] = [
+pub(super) const NAMED: [(&str, u32); 15] = [
     ("frame_uniform", FRAME_UNIFORM),
     ("frame_table", FRAME_TABLE),
     ("pool", POOL),
@@ -41,6 +42,7 @@ pub(super) const NAMED: [(&str, u32); 14] = [
     ("preint_grid", PREINT_GRID),
     ("grid_sampler", GRID_SAMPLER),
     ("tf_pieces_uniform", TF_PIECES_UNIFORM),
+    ("layer_uniform", LAYER_UNIFORM),
 ];
 
 /// The kernel's bind group layout: bricks filtered by the texture unit or
@@ -64,6 +66,7 @@ pub(super) fn layout(gpu: &Gpu, hw_filter: bool, grid_filterable: bool) -> wgpu:
                 texture(PREINT_GRID, wgpu::TextureViewDimension::D2, grid_filterable),
                 sampler(GRID_SAMPLER, grid_filterable),
                 uniform(TF_PIECES_UNIFORM),
+                uniform(LAYER_UNIFORM),
             ],
         })
 }
@@ -76,6 +79,7 @@ pub(super) struct Bound<'a> {
     pub tools: &'a wgpu::Buffer,
     pub grid: &'a wgpu::TextureView,
     pub grid_sampler: &'a wgpu::Sampler,
+    pub layers: &'a wgpu::Buffer,
 }
 
 /// The kernel's bind group over the frame's buffers, the pool and the
@@ -106,6 +110,7 @@ pub(super) fn group(
             entry(PREINT_GRID, TextureView(b.grid)),
             entry(GRID_SAMPLER, Sampler(b.grid_sampler)),
             entry(TF_PIECES_UNIFORM, b.tf.pieces.as_entire_binding()),
+            entry(LAYER_UNIFORM, b.layers.as_entire_binding()),
         ],
     })
 }

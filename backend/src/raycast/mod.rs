@@ -76,6 +76,8 @@ pub struct Raycaster {
     float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
     tools: wgpu::Buffer,
+    /// The registered layers' parameters (`LayerParams`).
+    layers: wgpu::Buffer,
     /// The per-frame buffers, kept across frames and grown by capacity.
     frame: FrameBuffers,
     /// Frame reconstruction's filter, made when a frame first asks for it.
@@ -122,7 +124,15 @@ impl Raycaster {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let layers = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("layer parameters"),
+            size: std::mem::size_of::<[params::LayerParams; parallax_common::config::MAX_LAYERS]>()
+                as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         Ok(Raycaster {
+            layers,
             bind_layout,
             pipeline_layout,
             sampler,
@@ -259,7 +269,8 @@ impl Raycaster {
     fn cull<'a>(&self, inputs: &RenderInputs<'a>) -> tiles::Cull<'a> {
         let s = inputs.settings;
         let plain = s.kernel.skips_empty_space();
-        let macrocells = s.macrocells && plain && inputs.pool.cells.per_axis > 0;
+        let macrocells =
+            s.macrocells && plain && inputs.pool.cells.per_axis > 0 && s.kernel.layers == 0;
         let multilevel = s.multilevel.is_some() && !s.kernel.iso;
         match (plain, macrocells && !multilevel) {
             _ if !s.tile_culling => tiles::Cull::Off,
@@ -330,6 +341,7 @@ impl Raycaster {
                 tools: &self.tools,
                 grid: tf.grid.as_ref().map_or(&self.no_grid, |g| &g.1),
                 grid_sampler: &self.grid_sampler,
+                layers: &self.layers,
             };
             let bind = bindings::group(gpu, &self.bind_layout, fr, &bound);
             self.frame.bind = Some((bind, tf.id, pool.id));
@@ -337,6 +349,23 @@ impl Raycaster {
         }
         gpu.queue
             .write_buffer(&self.tools, 0, bytemuck::cast_slice(&settings.tools));
+        let n = settings.kernel.layers as usize;
+        if n > 0 {
+            if tf.layers.len() != n || pool.channels < 1 + n as u32 {
+                bail!(
+                    "render: {n} layers, but the table holds {} and the pool {} channels",
+                    tf.layers.len(),
+                    pool.channels
+                );
+            }
+            let mut layers = settings.layers;
+            for (l, t) in layers.iter_mut().zip(&tf.layers) {
+                l.table = [t.table[0], t.table[1], t.table[2], l.table[3]];
+                l.at = t.at;
+            }
+            gpu.queue
+                .write_buffer(&self.layers, 0, bytemuck::cast_slice(&layers));
+        }
         Ok((rows, prediction_reset))
     }
 
@@ -355,7 +384,11 @@ impl Raycaster {
             pool, tf, settings, ..
         } = *inputs;
         let k = &settings.kernel;
-        let macrocells = settings.macrocells && k.skips_empty_space() && pool.cells.per_axis > 0;
+        // Registered layers: their empty cells are not marked, and the
+        // look-ahead fetches the volume's value alone.
+        let layered = k.layers > 0;
+        let macrocells =
+            settings.macrocells && k.skips_empty_space() && pool.cells.per_axis > 0 && !layered;
         let closed_pieces = tf
             .closed_pieces
             .filter(|_| settings.preintegration == Preintegration::Analytic && !k.iso);
@@ -364,7 +397,7 @@ impl Raycaster {
             && self.grid_filterable
             && !k.iso
             && tf.grid.is_some();
-        let lookahead = settings.lookahead && self.float_pool && (grid || closed);
+        let lookahead = settings.lookahead && self.float_pool && (grid || closed) && !layered;
         self.pipeline(
             gpu,
             &settings.kernel,

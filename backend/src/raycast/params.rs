@@ -70,6 +70,23 @@ pub struct GpuFrame {
     pub grid: [f32; 4],
 }
 
+/// WGSL `LayerParams`: one registered layer's table, opacity and
+/// view-dependent opacity (shaders/shared/layers.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct LayerParams {
+    /// vmin, 1 / bin width, bins, opacity.
+    pub table: [f32; 4],
+    /// First entry in `tf_table`, the bin midpoints' first entry, the
+    /// running integral's first entry (0: none), the pyramid's levels.
+    pub at: [u32; 4],
+    /// The view-dependent opacity's axis (volume space, unit); w: 1 where
+    /// the layer has one.
+    pub axis: [f32; 4],
+    /// Its angles (radians): from, 1 / (to − from), 0, 0.
+    pub angles: [f32; 4],
+}
+
 /// WGSL `ToolParams`: one tool's constant parameters (meaning per enhancer,
 /// see `shaders/enhancers/`).
 #[repr(C)]

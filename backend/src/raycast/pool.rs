@@ -148,6 +148,9 @@ pub struct BrickPool {
     pub side: u32,
     /// Full precision (`r32float`) or 8 bit (`r8unorm`).
     pub float: bool,
+    /// Values per texel: 1, or with registered layers the scene volume's
+    /// and each layer's (`rg32float`, `rgba32float`; the kernel's LAYERS).
+    pub channels: u32,
     /// Some uploaded brick had no-data voxels (NaN): the kernel must
     /// leave them out of its interpolation.
     pub no_data: bool,
@@ -159,19 +162,61 @@ pub struct BrickPool {
 impl BrickPool {
     /// Bytes one slot takes.
     pub fn slot_bytes(side: u32, float: bool) -> u64 {
-        side as u64 * side as u64 * side as u64 * if float { 4 } else { 1 }
+        Self::layered_slot_bytes(side, float, 1)
+    }
+
+    /// Bytes one slot of `channels` values per texel takes (more than one:
+    /// f32).
+    pub fn layered_slot_bytes(side: u32, float: bool, channels: u32) -> u64 {
+        let texel = match channels {
+            1 if !float => 1,
+            c => 4 * c as u64,
+        };
+        side as u64 * side as u64 * side as u64 * texel
     }
 
     /// The most slots a byte budget buys.
     pub fn slots_for_budget(budget_bytes: u64, side: u32, float: bool) -> u32 {
-        (budget_bytes / Self::slot_bytes(side, float)).min(u32::MAX as u64) as u32
+        Self::layered_slots_for_budget(budget_bytes, side, float, 1)
+    }
+
+    /// The most slots of `channels` values per texel a byte budget buys.
+    pub fn layered_slots_for_budget(
+        budget_bytes: u64,
+        side: u32,
+        float: bool,
+        channels: u32,
+    ) -> u32 {
+        (budget_bytes / Self::layered_slot_bytes(side, float, channels)).min(u32::MAX as u64) as u32
+    }
+
+    /// Values per texel of a pool for a scene volume and `layers`
+    /// registered layers (texture formats have 1, 2 or 4 channels).
+    pub fn channels_for(layers: usize) -> u32 {
+        match layers {
+            0 => 1,
+            1 => 2,
+            _ => 4,
+        }
     }
 
     pub fn new(gpu: &Gpu, slots: u32, side: u32, float: bool) -> Result<Self> {
+        Self::with_channels(gpu, slots, side, float, 1)
+    }
+
+    /// A pool of `channels` values per texel (more than one: f32, the scene
+    /// volume's in the first and its layers' in the others).
+    pub fn with_channels(
+        gpu: &Gpu,
+        slots: u32,
+        side: u32,
+        float: bool,
+        channels: u32,
+    ) -> Result<Self> {
         if slots == 0 {
             bail!(
                 "the GPU brick pool budget is too small for even one brick ({} KiB per brick)",
-                Self::slot_bytes(side, float) / 1024
+                Self::layered_slot_bytes(side, float, channels) / 1024
             );
         }
         let max = gpu.device.limits().max_texture_dimension_3d / side;
@@ -184,11 +229,13 @@ impl BrickPool {
             }
             grid[a] += 1;
         }
-        let format = if float {
-            wgpu::TextureFormat::R32Float
-        } else {
-            wgpu::TextureFormat::R8Unorm
+        let format = match (float, channels) {
+            (_, 2) => wgpu::TextureFormat::Rg32Float,
+            (_, 4) => wgpu::TextureFormat::Rgba32Float,
+            (true, _) => wgpu::TextureFormat::R32Float,
+            (false, _) => wgpu::TextureFormat::R8Unorm,
         };
+        let float = float || channels > 1;
         let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("brick pool"),
             size: wgpu::Extent3d {
@@ -231,6 +278,7 @@ impl BrickPool {
             grid,
             side,
             float,
+            channels,
             no_data: false,
             uploaded: 0,
             id: super::next_resource_id(),
@@ -292,6 +340,83 @@ impl BrickPool {
         self.uploaded
     }
 
+    /// Copies a node's bricks of the scene volume and its registered layers
+    /// ([`crate::store::LayerBricks`]) into a slot, one channel each (zeros
+    /// where a database has none; a no-data voxel takes `fills`' value of
+    /// its channel), with the mask of the channels that hold data in the
+    /// slot table's fourth word (the kernel composites only those).
+    pub fn upload_layered(
+        &mut self,
+        gpu: &Gpu,
+        slot: u32,
+        brick: &crate::store::Brick,
+        fills: &[f32],
+        variance: f32,
+    ) {
+        let s = self.side;
+        let n = (s * s * s) as usize;
+        let c = self.channels as usize;
+        assert_eq!(brick.values.len(), n, "brick size");
+        assert!(slot < self.slots(), "slot {slot} out of the pool");
+        let lb = brick
+            .layered
+            .as_ref()
+            .expect("a layered pool takes layered bricks");
+        let fill = |k: usize, v: f32| if v.is_nan() { fills[k] } else { v };
+        let mut texels = vec![0f32; n * c];
+        if lb.main {
+            for (t, &v) in texels.chunks_exact_mut(c).zip(&brick.values) {
+                t[0] = fill(0, v);
+            }
+        }
+        for (k, layer) in lb.layers.iter().enumerate() {
+            if let Some(values) = layer {
+                for (t, &v) in texels.chunks_exact_mut(c).zip(values) {
+                    t[1 + k] = fill(1 + k, v);
+                }
+            }
+        }
+        self.write_slot(gpu, slot, bytemuck::cast_slice(&texels), 4 * c as u32);
+        self.filled[slot as usize] = true;
+        self.values[slot as usize] = [0.0, 1.0];
+        let [lo, span, var] = [0.0f32, 1.0, variance.clamp(0.0, 1.0)].map(f32::to_bits);
+        self.slots.write(
+            gpu,
+            slot as u64 * SLOT_TEXELS,
+            &[[lo, span, var, lb.mask()]],
+        );
+        self.uploaded += (texels.len() * 4) as u64;
+    }
+
+    /// Writes one slot's (B+4)³ texels of `bpp` bytes.
+    fn write_slot(&self, gpu: &Gpu, slot: u32, bytes: &[u8], bpp: u32) {
+        let s = self.side;
+        let origin = wgpu::Origin3d {
+            x: slot % self.grid[0] * s,
+            y: slot / self.grid[0] % self.grid[1] * s,
+            z: slot / (self.grid[0] * self.grid[1]) * s,
+        };
+        gpu.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.texture,
+                mip_level: 0,
+                origin,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytes,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(s * bpp),
+                rows_per_image: Some(s),
+            },
+            wgpu::Extent3d {
+                width: s,
+                height: s,
+                depth_or_array_layers: s,
+            },
+        );
+    }
+
     /// Copies a brick's (B+4)³ data values into a slot. `variance` is the
     /// brick's variance placed on [0, 1] among the dataset's bricks (the
     /// prediction buffer's step, B10 §4.5). `cells`: the brick's macrocell
@@ -307,11 +432,6 @@ impl BrickPool {
         let s = self.side;
         assert_eq!(values.len(), (s * s * s) as usize, "brick size");
         assert!(slot < self.slots(), "slot {slot} out of the pool");
-        let origin = wgpu::Origin3d {
-            x: slot % self.grid[0] * s,
-            y: slot / self.grid[0] % self.grid[1] * s,
-            z: slot / (self.grid[0] * self.grid[1]) * s,
-        };
         // No-data voxels (NaN) become the pool's no-data value: the top
         // code of an 8-bit slot (values take the 255 codes below it), or
         // NO_DATA_VALUE in a float pool. The kernel leaves them out of its
@@ -364,25 +484,7 @@ impl BrickPool {
             (q, [lo, span * 255.0 / top])
         };
         let bpp = if self.float { 4 } else { 1 };
-        gpu.queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture: &self.texture,
-                mip_level: 0,
-                origin,
-                aspect: wgpu::TextureAspect::All,
-            },
-            &bytes,
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(s * bpp),
-                rows_per_image: Some(s),
-            },
-            wgpu::Extent3d {
-                width: s,
-                height: s,
-                depth_or_array_layers: s,
-            },
-        );
+        self.write_slot(gpu, slot, &bytes, bpp);
         let n_cells = self.cells.cells();
         if let Some(stored) = cells.filter(|c| n_cells > 0 && c.len() == n_cells) {
             self.cells.set_stored(slot, stored);

@@ -1,7 +1,9 @@
 //! The ray caster's quality knobs and the kernel a frame uses.
 
+use super::params::LayerParams;
 use super::{KernelKey, ToolParams};
 use parallax_common::config::Preintegration;
+use parallax_common::config::MAX_LAYERS;
 use parallax_common::tools::MAX_ENHANCERS;
 
 /// Quality knobs of the ray caster, and the kernel a frame uses.
@@ -69,6 +71,10 @@ pub struct RenderSettings {
     /// LOOKAHEAD), on pools of float voxels read with the 2D table; the
     /// image is the same bit for bit, off only to show that.
     pub lookahead: bool,
+    /// The registered layers' opacity (`table[3]`) and view-dependent
+    /// opacity (`axis`, `angles`), as many as `kernel.layers`; their tables'
+    /// fields come from the [`super::TfTable`].
+    pub layers: [LayerParams; MAX_LAYERS],
 }
 
 /// What multilevel sampling needs to know of refinement: the same footprint
@@ -106,6 +112,7 @@ impl Default for RenderSettings {
             preintegration: Preintegration::Exact,
             tile_culling: true,
             lookahead: true,
+            layers: [LayerParams::default(); MAX_LAYERS],
         }
     }
 }

@@ -44,6 +44,10 @@ pub const MODULES: &[(&str, &str)] = &[
         "composite",
         include_str!("../../../shaders/shared/composite.wgsl"),
     ),
+    (
+        "layers",
+        include_str!("../../../shaders/shared/layers.wgsl"),
+    ),
     ("dvr", include_str!("../../../shaders/steppers/dvr.wgsl")),
     ("iso", include_str!("../../../shaders/steppers/iso.wgsl")),
     (
@@ -106,6 +110,9 @@ pub struct KernelKey {
     pub iso: bool,
     /// Enhancers in chain order (at most [`MAX_ENHANCERS`]).
     pub enhancers: Vec<EnhancerKind>,
+    /// Registered layers combined with the volume (DVR only; at most
+    /// [`parallax_common::config::MAX_LAYERS`]): shared/layers.wgsl.
+    pub layers: u32,
 }
 
 impl KernelKey {
@@ -127,7 +134,15 @@ impl KernelKey {
             chains.extend(next.iter().cloned());
             last = next;
         }
-        Self::with_steppers(&chains)
+        let mut out = Self::with_steppers(&chains);
+        for layers in 1..=parallax_common::config::MAX_LAYERS as u32 {
+            out.extend(chains.iter().map(|e| KernelKey {
+                enhancers: e.clone(),
+                layers,
+                ..Default::default()
+            }));
+        }
+        out
     }
 
     /// The combinations the naga test compiles: every stepper with no
@@ -145,6 +160,16 @@ impl KernelKey {
             chains.push(vec![k; MAX_ENHANCERS]);
         }
         let mut out = Self::with_steppers(&chains);
+        // Registered layers, alone and under a clip plane and a probe.
+        for layers in 1..=parallax_common::config::MAX_LAYERS as u32 {
+            for enhancers in [vec![], vec![EnhancerKind::ClipPlane, EnhancerKind::Probe]] {
+                out.push(KernelKey {
+                    layers,
+                    enhancers,
+                    ..Default::default()
+                });
+            }
+        }
         // The pass-through compiles to nothing and the gradient diagnostic
         // only reads: under MImDA with refraction their pairs meet nothing
         // that DVR's pairs and their full chains have not.
@@ -164,8 +189,8 @@ impl KernelKey {
                     out.push(KernelKey {
                         mimda,
                         refraction,
-                        iso: false,
                         enhancers: vec![a, b],
+                        ..Default::default()
                     });
                 }
             }
@@ -183,8 +208,8 @@ impl KernelKey {
                     out.push(KernelKey {
                         mimda,
                         refraction,
-                        iso: false,
                         enhancers: e.clone(),
+                        ..Default::default()
                     });
                 }
             }
@@ -225,6 +250,16 @@ impl KernelKey {
         if self.iso && (self.mimda || self.refraction) {
             bail!("the isosurface stepper takes neither MImDA nor refraction");
         }
+        if self.layers > 0 && (self.iso || self.mimda || self.refraction) {
+            bail!("registered layers are combined by the DVR stepper only");
+        }
+        if self.layers as usize > parallax_common::config::MAX_LAYERS {
+            bail!(
+                "{} layers: the kernel combines at most {}",
+                self.layers,
+                parallax_common::config::MAX_LAYERS
+            );
+        }
         let any = |f: fn(&EnhancerSpec) -> bool| self.specs().any(f);
         let mut s = String::new();
         let _ = writeln!(
@@ -248,6 +283,7 @@ impl KernelKey {
         });
         s.push_str("#import iso\n");
         let _ = writeln!(s, "const ISO: bool = {};", self.iso);
+        let _ = writeln!(s, "const LAYERS: u32 = {}u;", self.layers);
         let _ = writeln!(s, "const HAS_BREAKS: bool = {};", any(|e| e.needs.breaks));
         let _ = writeln!(
             s,
@@ -422,7 +458,10 @@ mod tests {
         // refraction.
         assert_eq!(
             keys.len(),
-            (2 * 2 + 1) * (1 + 2 * kinds) + kinds * kinds + (kinds - 2) * (kinds - 2)
+            (2 * 2 + 1) * (1 + 2 * kinds)
+                + 2 * parallax_common::config::MAX_LAYERS
+                + kinds * kinds
+                + (kinds - 2) * (kinds - 2)
         );
         // Spread over the cores: naga is single-threaded.
         let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
@@ -461,7 +500,7 @@ mod tests {
         // TF_PIECES, a count, takes its largest value (the whole
         // uniform array).
         const PATHS: [&str; 3] = ["END_PREINT", "GRID_PREINT", "ANALYTIC_PREINT"];
-        if key.enhancers.len() == MAX_ENHANCERS || key.enhancers.is_empty() {
+        if (key.enhancers.len() == MAX_ENHANCERS || key.enhancers.is_empty()) && key.layers == 0 {
             let flags: Vec<&str> = OVERRIDES
                 .iter()
                 .copied()
@@ -565,7 +604,7 @@ mod tests {
     /// the same size, and every field at the same offset.
     #[test]
     fn rust_mirrors_match_the_wgsl_layout() {
-        use super::super::params::{GpuFrame, GpuView, ToolParams};
+        use super::super::params::{GpuFrame, GpuView, LayerParams, ToolParams};
         use crate::index::IndexNode;
         use std::mem::{offset_of, size_of};
         let src = kernel(&KernelKey::default()).unwrap();
@@ -608,6 +647,7 @@ mod tests {
         );
         check!("IndexNode", IndexNode, [tree, data, range, nx, ny, nz]);
         check!("ToolParams", ToolParams, [a, b, c, d]);
+        check!("LayerParams", LayerParams, [table, at, axis, angles]);
         // The closed form's uniform: its header and MAX_PIECES pieces.
         let (span, _) = layout("TfPieces");
         assert_eq!(

@@ -46,6 +46,10 @@ pub struct TfTable {
     pub(super) pieces: wgpu::Buffer,
     /// Which table this is (a bind group names one table).
     pub(super) id: u64,
+    /// The registered layers' DVR tables, after the volume's parts: each
+    /// one's `LayerParams` table and entry fields (its opacity and view
+    /// opacity are the frame's).
+    pub(super) layers: Vec<super::params::LayerParams>,
 }
 
 /// An n × n rgba32float texture for the 2D pre-integration table.
@@ -92,6 +96,18 @@ fn over_smallest_bin(bins: &[f64], x: f64) -> f64 {
 impl TfTable {
     /// The tables of `tf`, `table` its pre-integration table.
     pub fn new(gpu: &Gpu, table: &PreintTable, tf: &TransferFunction) -> Self {
+        Self::with_layers(gpu, table, tf, &[]).expect("a table without layers")
+    }
+
+    /// The tables of `tf` and, after them, the DVR tables of registered
+    /// layers (shaders/shared/layers.wgsl), each with its running integral
+    /// where its range allows.
+    pub fn with_layers(
+        gpu: &Gpu,
+        table: &PreintTable,
+        tf: &TransferFunction,
+        layers: &[&PreintTable],
+    ) -> anyhow::Result<Self> {
         let max_importance = tf.max_importance();
         let (planar, layout) = table.gpu_layout();
         // Two interleaved parts with the same layout: (τ, k̃r, k̃g, k̃b), what
@@ -123,6 +139,33 @@ impl TfTable {
                 None,
             ],
         );
+        let mut layer_params = Vec::with_capacity(layers.len());
+        for t in layers {
+            let (planar, layout) = t.gpu_layout();
+            let base = data.len() as u32;
+            let prefix = Self::push_part(
+                &mut data,
+                &planar,
+                &layout,
+                t,
+                [
+                    Some(Channel::Tau),
+                    Some(Channel::EmissionR),
+                    Some(Channel::EmissionG),
+                    Some(Channel::EmissionB),
+                ],
+            );
+            layer_params.push(super::params::LayerParams {
+                table: [
+                    layout.vmin as f32,
+                    (1.0 / layout.bin_width) as f32,
+                    layout.n_bins as f32,
+                    0.0,
+                ],
+                at: [base, base + layout.mid_offset, prefix, layout.levels],
+                ..Default::default()
+            });
+        }
         let texels: Vec<[u32; 4]> = data.iter().map(|v| v.map(f32::to_bits)).collect();
         let buffer = texels::TexelTable::new(gpu, "pre-integration table", texels.len() as u64);
         buffer.write(gpu, 0, &texels);
@@ -149,7 +192,7 @@ impl TfTable {
                 contents: bytemuck::cast_slice(&uniform),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-        TfTable {
+        Ok(TfTable {
             buffer,
             layout,
             prefix_offset,
@@ -162,7 +205,8 @@ impl TfTable {
             aux_prefix,
             max_importance: max_importance as f32,
             id: next_resource_id(),
-        }
+            layers: layer_params,
+        })
     }
 
     /// Appends one part (four channels interleaved, nodes and pyramid) and,

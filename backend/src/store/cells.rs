@@ -18,12 +18,45 @@ pub struct Brick {
     /// C³ (lo, hi) data-value ranges, x fastest; lo > hi for a cell with no
     /// data at all.
     pub cells: Option<Vec<[f32; 2]>>,
+    /// In a scene with registered layers, the same node's bricks of the
+    /// layers (the loader reads them together); `None` otherwise.
+    pub layered: Option<LayerBricks>,
+}
+
+/// A node's bricks of a scene's registered layers (`[[layer]]`), read with
+/// the scene volume's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LayerBricks {
+    /// Whether the brick's `values` are the scene volume's (false: only
+    /// layers store this node, and `values` are zeros).
+    pub main: bool,
+    /// Each layer's (B+4)³ values where it stores the node.
+    pub layers: Vec<Option<Vec<f32>>>,
+}
+
+impl LayerBricks {
+    /// Which channels hold data: bit 0 the scene volume, bit k layer k.
+    pub fn mask(&self) -> u32 {
+        self.layers
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| l.is_some())
+            .fold(self.main as u32, |m, (k, _)| m | 2 << k)
+    }
 }
 
 impl Brick {
     /// Bytes the brick takes in memory.
     pub fn bytes(&self) -> u64 {
+        let layers = self.layered.as_ref().map_or(0, |l| {
+            l.layers
+                .iter()
+                .flatten()
+                .map(|v| std::mem::size_of_val(v.as_slice()))
+                .sum::<usize>()
+        });
         (std::mem::size_of_val(self.values.as_slice())
+            + layers
             + self
                 .cells
                 .as_ref()

@@ -27,7 +27,7 @@ pub mod layout;
 pub mod reader;
 pub mod writer;
 
-pub use cells::Brick;
+pub use cells::{Brick, LayerBricks};
 pub use codec::BrickEncoding;
 pub use format::{Header, NodeRecord, Summary};
 pub use import::{import, ImportOptions, ImportReport};

@@ -285,7 +285,11 @@ impl OctreeDb {
         )
         .map_err(fail)?;
         let cells = (self.cells_len > 0).then(|| cells::decode(cell_bytes, rec.min, rec.max));
-        Ok(Some(Brick { values, cells }))
+        Ok(Some(Brick {
+            values,
+            cells,
+            layered: None,
+        }))
     }
 }
 

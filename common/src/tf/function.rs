@@ -282,6 +282,17 @@ impl TransferFunction {
         t
     }
 
+    /// The same function with every extinction times `k` ≥ 0 (the colours
+    /// kept, so the emission k̃ = τ·c scales with it): a layer's share of
+    /// a medium.
+    pub fn scaled_extinction(&self, k: f64) -> TransferFunction {
+        let mut t = self.clone();
+        for p in &mut t.points {
+            p.extinction *= k.max(0.0);
+        }
+        t
+    }
+
     pub fn max_importance(&self) -> f64 {
         self.points.iter().map(|p| p.importance).fold(0.0, f64::max)
     }

@@ -249,7 +249,8 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
             sync_io: opts.sync_io,
             present: opts.present,
         },
-    )?;
+    )
+    .with_context(|| opts.scene.display().to_string())?;
     transport.broadcast(&ToBackend::TransferFunction {
         version: 1,
         tf: tf.clone(),
@@ -459,6 +460,7 @@ fn frame_loop(
             stream: state.streamed(display),
             pick,
             grow: grow.map(|(_, tolerance)| tolerance),
+            layers: state.layers.clone(),
         };
         let start = Instant::now();
         transport.broadcast(&ToBackend::Frame(fs.clone()))?;

@@ -277,6 +277,7 @@ fn key_of(r: &Recorded, tf_file: Option<PathBuf>) -> Key {
         tools: Some(ToolSet(r.tools.clone())),
         cursor: s.render.overlay.cursor,
         overlay: Some(s.render.overlay.show),
+        layers: (!s.layers.is_empty()).then(|| s.layers.clone()),
     }
 }
 

@@ -6,7 +6,7 @@ use anyhow::{bail, ensure, Context, Result};
 use glam::{DMat3, DQuat, DVec3, EulerRot};
 use parallax_common::camera::Placement;
 use parallax_common::config::{Display, Scene};
-use parallax_common::protocol::StreamImage;
+use parallax_common::protocol::{LayerControl, StreamImage};
 use parallax_common::tf::TransferFunction;
 use parallax_common::tools::{EnhancerKind, Tool, MAX_ENHANCERS};
 use serde::{Deserialize, Serialize};
@@ -36,6 +36,10 @@ pub struct LiveState {
     /// The 3D cursor (m, display space), moved by dragging in the view.
     #[serde(default)]
     pub cursor: Option<[f64; 3]>,
+    /// The scene's registered layers: each one shown or not, and its
+    /// opacity (`[[layer]]` order).
+    #[serde(default)]
+    pub layers: Vec<LayerControl>,
 }
 
 /// A transfer function point as the page sends it.
@@ -89,6 +93,12 @@ pub enum ClientMsg {
     /// Removes tool `index`.
     RemoveTool {
         index: usize,
+    },
+    /// Shows or hides registered layer `index`, or sets its opacity.
+    Layer {
+        index: usize,
+        visible: Option<bool>,
+        opacity: Option<f64>,
     },
     /// Moves tool `from` to place `to` of the chain (enhancers act in
     /// chain order).
@@ -196,6 +206,11 @@ pub fn hello(
             .map(|k| (k.file().to_string(), k.page_info(range)))
             .collect::<serde_json::Map<_, _>>(),
         "eye_range": [-w, w],
+        // The registered layers, named by their volume and function files.
+        "layers": scene.layers.iter().map(|l| {
+            let name = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            format!("{} · {}", name(&l.volume), name(&l.transfer_function))
+        }).collect::<Vec<_>>(),
         "record_dir": record_dir.display().to_string(),
     })
 }
@@ -219,6 +234,7 @@ impl LiveState {
             recording: false,
             overlay: scene.render.overlay.show,
             cursor: scene.render.overlay.cursor,
+            layers: scene.layers.iter().map(LayerControl::from).collect(),
         }
     }
 
@@ -232,6 +248,23 @@ impl LiveState {
                 let turn = DMat3::from_rotation_y(dx.to_radians())
                     * DMat3::from_rotation_x(dy.to_radians());
                 self.placement.rotation_deg = euler_deg(turn * self.placement.rotation());
+            }
+            ClientMsg::Layer {
+                index,
+                visible,
+                opacity,
+            } => {
+                let n = self.layers.len();
+                let l = self
+                    .layers
+                    .get_mut(index)
+                    .with_context(|| format!("layer.index {index}: the scene has {n} layers"))?;
+                if let Some(v) = visible {
+                    l.visible = v;
+                }
+                if let Some(o) = opacity {
+                    l.opacity = within("layer.opacity", o, 0.0, 1.0)?;
+                }
             }
             ClientMsg::Zoom { factor } => {
                 let f = within("zoom.factor", factor, 0.1, 10.0)?;
@@ -451,6 +484,22 @@ impl LiveState {
             t.check(&format!("state.tools {i}"))?;
         }
         next.tools = s.tools;
+        ensure!(
+            s.layers.len() == next.layers.len(),
+            "state.layers: {} layers, the scene has {}",
+            s.layers.len(),
+            next.layers.len()
+        );
+        for (i, l) in s.layers.iter().enumerate() {
+            next.apply(
+                ClientMsg::Layer {
+                    index: i,
+                    visible: Some(l.visible),
+                    opacity: Some(l.opacity),
+                },
+                display,
+            )?;
+        }
         next.apply(
             ClientMsg::Output {
                 output: s.output,

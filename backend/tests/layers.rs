@@ -1,0 +1,388 @@
+//! Registered layers (a scene's `[[layer]]`s, G10 §4): volumes on the scene
+//! volume's grid, each drawn through its own transfer function and combined
+//! with it as media (extinctions and extinction-weighted emissions add).
+//! Measured against the exact integral, against the volume alone, and for
+//! what they cost when they show nothing. Every test prints the figures it
+//! asserts on.
+
+mod support;
+use parallax_backend::data;
+use parallax_backend::gpu::AdapterRequest;
+use parallax_backend::reference::{self, Tolerance};
+use parallax_backend::render::{Frame, Renderer};
+use parallax_backend::store::BrickEncoding;
+use parallax_backend::volume::{Volume, VoxelType};
+use parallax_common::camera::{Placement, View};
+use parallax_common::config::{Layer, RenderConfig, ViewOpacity};
+use parallax_common::tf::{ControlPoint, TransferFunction};
+use std::path::{Path, PathBuf};
+
+/// Writes `tf` as a transfer function file.
+fn write_tf(path: &Path, tf: &TransferFunction) -> PathBuf {
+    std::fs::write(path, toml::to_string(tf).unwrap()).unwrap();
+    path.to_path_buf()
+}
+
+fn layer(volume: &Path, tf: &Path) -> Layer {
+    Layer {
+        volume: volume.to_path_buf(),
+        transfer_function: tf.to_path_buf(),
+        opacity: 1.0,
+        visible: true,
+        view_opacity: None,
+    }
+}
+
+/// The converged frame of `db` with `layers`, its own function `tf`.
+fn render(
+    db: &Path,
+    layers: &[Layer],
+    tf: &TransferFunction,
+    placement: &Placement,
+    views: &[View],
+    cfg: &RenderConfig,
+) -> (Frame, Renderer) {
+    let mut r = Renderer::with_layers(db, layers, cfg, &AdapterRequest::from_env(None, 0)).unwrap();
+    r.set_transfer_function(1, tf).unwrap();
+    let f = r.converge(placement, views, cfg, 64).unwrap();
+    (f, r)
+}
+
+fn bits_differ(a: &[[f32; 4]], b: &[[f32; 4]]) -> usize {
+    a.iter()
+        .zip(b)
+        .filter(|(p, q)| p.map(f32::to_bits) != q.map(f32::to_bits))
+        .count()
+}
+
+/// Two layers of one volume with half its extinction each are that volume
+/// with the whole (the averages of τ and k̃ over a segment add): on the CT
+/// phantom with Slicer's CT-Bone, at fine settings, against the exact
+/// integral of the whole function and against the volume rendered alone.
+#[test]
+fn two_half_extinction_layers_are_the_whole_volume() {
+    let dir = tempfile::tempdir().unwrap();
+    let (db, bone) = support::ct_bone(dir.path(), BrickEncoding::F32);
+    let vol = Volume::read_all(
+        data::open(&dir.path().join("ct.nrrd"), None)
+            .unwrap()
+            .as_mut(),
+    )
+    .unwrap();
+    let half = bone.scaled_extinction(0.5);
+    let half_file = write_tf(&dir.path().join("half.toml"), &half);
+    let placement = support::ct_placement();
+    let view = View::window([96, 96], [0.3, 0.3], [0.0, 0.0, 0.8]);
+    let cfg = support::exact_config();
+    let (whole, _) = render(&db, &[], &bone, &placement, &[view], &cfg);
+    let (layered, r) = render(
+        &db,
+        &[layer(&db, &half_file)],
+        &half,
+        &placement,
+        &[view],
+        &cfg,
+    );
+    assert_eq!(r.layer_count(), 1);
+    let (a, b) = (&layered.images[0], &whole.images[0]);
+    support::assert_valid("two half layers", a);
+    let exact = reference::render(&vol, &bone, &placement, &view, Tolerance { abs: 1e-6 });
+    let (e_layered, max_layered) = support::error(a, &exact);
+    let (e_whole, _) = support::error(b, &exact);
+    let between: Vec<[f64; 4]> = b.iter().map(|p| p.map(f64::from)).collect();
+    let (e_between, max_between) = support::error(a, &between);
+    let lit = a.iter().filter(|p| p[3] > 0.05).count();
+    println!(
+        "two half-extinction layers: RMSE {e_layered:.2e} (max {max_layered:.2e}) against the exact integral, the volume alone {e_whole:.2e}; between them RMSE {e_between:.2e}, max {max_between:.2e}; {lit} of {} pixels lit",
+        a.len()
+    );
+    assert!(lit > a.len() / 10, "the bones are in view");
+    assert!(
+        e_layered <= 1e-3,
+        "against the exact integral: {e_layered:.2e}"
+    );
+    assert!(
+        e_between <= 1e-4,
+        "against the volume alone: {e_between:.2e}"
+    );
+}
+
+/// A layer whose transfer function is empty over its data costs nothing:
+/// the image is the volume's alone bit for bit, none of its bricks is read,
+/// and the pool keeps one channel.
+#[test]
+fn an_empty_layer_changes_no_pixel_and_reads_no_brick() {
+    let dir = tempfile::tempdir().unwrap();
+    let (db, bone) = support::ct_bone(dir.path(), BrickEncoding::U8Range);
+    // Extinction only above the data's largest value.
+    let empty = TransferFunction::from_points(vec![
+        ControlPoint::new(-4000.0, [1.0, 0.0, 0.0], 0.0),
+        ControlPoint::new(60000.0, [1.0, 0.0, 0.0], 0.0),
+        ControlPoint::new(65000.0, [1.0, 0.0, 0.0], 5.0),
+    ])
+    .unwrap();
+    let empty_file = write_tf(&dir.path().join("empty.toml"), &empty);
+    let placement = support::ct_placement();
+    let view = View::window([96, 96], [0.3, 0.3], [0.0, 0.0, 0.8]);
+    let cfg = RenderConfig::default();
+    let (alone, _) = render(&db, &[], &bone, &placement, &[view], &cfg);
+    let (with, r) = render(
+        &db,
+        &[layer(&db, &empty_file)],
+        &bone,
+        &placement,
+        &[view],
+        &cfg,
+    );
+    let differ = bits_differ(&with.images[0], &alone.images[0]);
+    println!(
+        "an empty layer: {differ} pixels differ; {} bytes read against {} alone; {} layers drawn",
+        with.stats.bytes_read,
+        alone.stats.bytes_read,
+        r.layer_count()
+    );
+    assert_eq!(r.layer_count(), 0);
+    assert_eq!(differ, 0);
+    assert_eq!(with.stats.bytes_read, alone.stats.bytes_read);
+}
+
+/// A layer is read only where its own function sees data: on a volume
+/// whose bright values (250) fill one small ball and whose rest is a dim
+/// ramp, a layer that shows only the bright values reads the few bricks
+/// around the ball, where the same layer showing the ramp reads all that
+/// the volume reads; and the ball adds to the image.
+#[test]
+fn a_layer_reads_only_the_bricks_its_function_sees() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 64;
+    let vol = Volume::from_fn([n; 3], [1.0; 3], VoxelType::U8, |i, j, k| {
+        let d2 = [i, j, k]
+            .iter()
+            .map(|&x| (x as f64 - 20.0).powi(2))
+            .sum::<f64>();
+        if d2 <= 64.0 {
+            250.0
+        } else {
+            (20 + (i + j + k) / 3) as f32
+        }
+    });
+    let db = dir.path().join("ball.pxo");
+    support::import_volume(&vol, &db, 16, BrickEncoding::U8Range);
+    let ramp = TransferFunction::from_points(vec![
+        ControlPoint::new(0.0, [0.3, 0.5, 0.9], 0.0),
+        ControlPoint::new(100.0, [0.3, 0.5, 0.9], 0.01),
+    ])
+    .unwrap();
+    let bright = TransferFunction::from_points(vec![
+        ControlPoint::new(200.0, [1.0, 0.9, 0.2], 0.0),
+        ControlPoint::new(240.0, [1.0, 0.9, 0.2], 0.3),
+    ])
+    .unwrap();
+    let ramp_file = write_tf(&dir.path().join("ramp.toml"), &ramp);
+    let bright_file = write_tf(&dir.path().join("bright.toml"), &bright);
+    let placement = Placement {
+        center: [0.0; 3],
+        rotation_deg: [20.0, 35.0, 0.0],
+        size: 0.2,
+    };
+    let view = View::window([96, 96], [0.3, 0.3], [0.0, 0.0, 0.8]);
+    let cfg = support::exact_config();
+    let run = |layers: &[Layer]| render(&db, layers, &ramp, &placement, &[view], &cfg).0;
+    let alone = run(&[]);
+    let twice = run(&[layer(&db, &ramp_file)]);
+    let with = run(&[layer(&db, &bright_file)]);
+    let main = alone.stats.bytes_read;
+    let layer_all = twice.stats.bytes_read - main;
+    let layer_bright = with.stats.bytes_read - main;
+    let alpha = |f: &Frame| support::mean_alpha(&f.images[0]);
+    println!(
+        "a layer of the bright ball read {layer_bright} bytes of its bricks, one of the ramp {layer_all} (the volume {main}); mean opacity {:.3} alone, {:.3} with the ball's layer",
+        alpha(&alone),
+        alpha(&with)
+    );
+    assert_eq!(layer_all, main, "the same function reads the same bricks");
+    assert!(
+        layer_bright > 0 && layer_bright < main / 3,
+        "{layer_bright} of {main}"
+    );
+    assert!(alpha(&with) > alpha(&alone) + 0.005);
+}
+
+/// View-dependent layer opacity (G10 §4): the layer shows fully where a
+/// ray's angle to the axis is past the second angle (bit for bit the layer
+/// at full opacity), not at all before the first (the volume alone, to the
+/// rounding of the layered kernel's interpolation), and in between as the smoothstep says (against the layer at that
+/// fixed opacity, for a narrow view whose rays all meet the axis at about
+/// one angle).
+#[test]
+fn view_dependent_opacity_follows_the_smoothstep() {
+    let dir = tempfile::tempdir().unwrap();
+    // Full precision, so that the volume alone and the layered pool hold
+    // the same values (an 8-bit pool keeps codes).
+    let (db, bone) = support::ct_bone(dir.path(), BrickEncoding::F32);
+    let soft = TransferFunction::load(support::configs().join("tf/ct-soft-tissue.toml")).unwrap();
+    let bone_file = write_tf(&dir.path().join("bone.toml"), &bone);
+    let placement = support::ct_placement();
+    // A narrow view along −z: every ray within 1.1° of (0, 0, −1), at about
+    // 180° to +z.
+    let view = View::window([48, 48], [0.03, 0.03], [0.0, 0.0, 0.8]);
+    let cfg = RenderConfig::default();
+    let with = |opacity: f64, view_opacity: Option<ViewOpacity>| {
+        let l = Layer {
+            opacity,
+            view_opacity,
+            ..layer(&db, &bone_file)
+        };
+        render(&db, &[l], &soft, &placement, &[view], &cfg).0
+    };
+    let (alone, _) = render(&db, &[], &soft, &placement, &[view], &cfg);
+    let full = with(1.0, None);
+    let seen = with(
+        1.0,
+        Some(ViewOpacity {
+            axis: [0.0, 0.0, 1.0],
+            angles_deg: [150.0, 170.0],
+        }),
+    );
+    let unseen = with(
+        1.0,
+        Some(ViewOpacity {
+            axis: [0.0, 0.0, -1.0],
+            angles_deg: [30.0, 60.0],
+        }),
+    );
+    // An axis at 40° to the view's direction, half way between 20° and
+    // 60°: smoothstep ½.
+    let tilt = 40f64.to_radians();
+    let middle = with(
+        1.0,
+        Some(ViewOpacity {
+            axis: [tilt.sin(), 0.0, -tilt.cos()],
+            angles_deg: [20.0, 60.0],
+        }),
+    );
+    let half = with(0.5, None);
+    let d_seen = bits_differ(&seen.images[0], &full.images[0]);
+    let alone_ref: Vec<[f64; 4]> = alone.images[0].iter().map(|p| p.map(f64::from)).collect();
+    let (e_unseen, max_unseen) = support::error(&unseen.images[0], &alone_ref);
+    let half_ref: Vec<[f64; 4]> = half.images[0].iter().map(|p| p.map(f64::from)).collect();
+    let (e_middle, _) = support::error(&middle.images[0], &half_ref);
+    let full_ref: Vec<[f64; 4]> = full.images[0].iter().map(|p| p.map(f64::from)).collect();
+    let (e_full, _) = support::error(&half.images[0], &full_ref);
+    println!(
+        "view-dependent opacity: past the angles {d_seen} pixels differ from the layer at full opacity; before them RMSE {e_unseen:.2e} (max {max_unseen:.2e}) from the volume alone (the layered kernel's rounding); half way RMSE {e_middle:.2e} against the layer at opacity ½ (which is {e_full:.2e} from full)"
+    );
+    assert_eq!(d_seen, 0);
+    assert!(
+        e_unseen < 2e-5 && max_unseen < 1e-3,
+        "{e_unseen:.2e}, max {max_unseen:.2e}"
+    );
+    assert!(e_full > 1e-3, "the layer shows: {e_full:.2e}");
+    assert!(
+        e_middle < 0.1 * e_full,
+        "{e_middle:.2e} against {e_full:.2e}"
+    );
+}
+
+/// Bad layers are refused naming the layer's field and file: another grid
+/// (without a transform), a corrupt database, a missing transfer function.
+#[test]
+fn bad_layers_are_refused_naming_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let (db, bone) = support::ct_bone(dir.path(), BrickEncoding::U8Range);
+    let bone_file = write_tf(&dir.path().join("bone.toml"), &bone);
+    let small = dir.path().join("small.pxo");
+    support::import_volume(
+        &support::marschner_lobb(40),
+        &small,
+        16,
+        BrickEncoding::U8Range,
+    );
+    let corrupt = dir.path().join("corrupt.pxo");
+    let mut bytes = std::fs::read(&db).unwrap();
+    bytes.truncate(100);
+    std::fs::write(&corrupt, &bytes).unwrap();
+    let cfg = RenderConfig::default();
+    let open = |l: Layer| {
+        let t = std::time::Instant::now();
+        let e = Renderer::with_layers(&db, &[l], &cfg, &AdapterRequest::from_env(None, 0))
+            .err()
+            .expect("refused");
+        (format!("{e:#}"), t.elapsed())
+    };
+    for (l, want) in [
+        (layer(&small, &bone_file), "layer[0].volume"),
+        (layer(&corrupt, &bone_file), "layer[0].volume"),
+        (
+            layer(&db, &dir.path().join("none.toml")),
+            "layer[0].transfer_function",
+        ),
+    ] {
+        let (e, took) = open(l);
+        println!("refused in {took:?}: {e}");
+        assert!(e.contains(want), "{e}");
+        assert!(took.as_secs_f64() < 1.0);
+    }
+    let (e, _) = open(layer(&small, &bone_file));
+    assert!(e.contains("not the scene volume's"), "{e}");
+}
+
+/// View-dependent opacity on a light field display (G10 §4): eyes on
+/// either side of the head, each seeing it through multi-centre views
+/// (G10 Eq. 1, the rays the simulator resamples for that eye). The layer's
+/// share of an eye's image (its mean opacity over the volume's alone, as a
+/// fraction of the full layer's) is that of the layer at the fixed opacity
+/// the smoothstep gives the eye's direction to the head's centre.
+#[test]
+fn a_layers_share_at_two_eyes_follows_the_smoothstep() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(db) = support::colin27(dir.path(), BrickEncoding::U8Range) else {
+        return;
+    };
+    let (skin, brain) = support::colin27_tfs();
+    // The skin at a twentieth of its extinction: translucent, so that its
+    // share of the image grows with its opacity instead of saturating.
+    let skin_file = write_tf(&dir.path().join("skin.toml"), &skin.scaled_extinction(0.05));
+    let placement = support::colin_placement();
+    let cfg = RenderConfig::default();
+    let v = ViewOpacity {
+        axis: [-1.0, 0.0, 0.0],
+        angles_deg: [40.0, 130.0],
+    };
+    let mut rows = Vec::new();
+    for ex in [-0.5, 0.7] {
+        let views = support::colin27_lightfield(&[ex], 80);
+        let alpha = |layers: &[Layer]| {
+            let (f, _) = render(&db, layers, &brain, &placement, &views, &cfg);
+            support::mean_alpha(&f.images[0])
+        };
+        let with = |opacity: f64, view_opacity| Layer {
+            opacity,
+            view_opacity,
+            ..layer(&db, &skin_file)
+        };
+        // The eye's direction to the head's centre, and its factor.
+        let d = glam::DVec3::new(-ex, 0.0, -1.5).normalize();
+        let theta = d.dot(glam::DVec3::from(v.axis)).acos().to_degrees();
+        let f = v.factor(theta);
+        let base = alpha(&[]);
+        let full = alpha(&[with(1.0, None)]);
+        let fixed = alpha(&[with(f, None)]);
+        let seen = alpha(&[with(1.0, Some(v))]);
+        let share = |a: f64| (a - base) / (full - base);
+        println!(
+            "eye at x = {ex}: {theta:.1}° to the axis, smoothstep {f:.3}; the layer's share {:.3} (at that fixed opacity {:.3}); mean opacity {base:.3} without it, {full:.3} at full",
+            share(seen),
+            share(fixed)
+        );
+        assert!(full - base > 0.02, "the skin adds opacity");
+        rows.push((f, share(seen), share(fixed)));
+    }
+    for &(_, seen, fixed) in &rows {
+        assert!((seen - fixed).abs() < 0.1, "{seen:.3} against {fixed:.3}");
+    }
+    assert!(
+        rows[0].1 > rows[1].1 + 0.3,
+        "the eyes see the layer differently"
+    );
+}

@@ -1,0 +1,144 @@
+//! What registered layers cost (`[[layer]]`, G10 §4): a volume with one or
+//! two layers on its grid against the volume alone, at the user's default
+//! settings. The layers are the volume itself, so that the media are the
+//! same whatever the count: with n layers, each of the n + 1 media takes
+//! 1/(n + 1) of the function's extinction, and the image is the volume's
+//! (checked: the RMSE against it). A layer whose function is empty must
+//! leave the image bit for bit and cost nothing. Times are medians of
+//! rounds run round-robin, forwards then backwards.
+
+use crate::measure::{self, timed_frame, write_table, Shot};
+use anyhow::Result;
+use parallax_backend::gpu::AdapterRequest;
+use parallax_backend::render::Renderer;
+use parallax_common::config::{Layer, RenderConfig};
+use parallax_common::tf::{ControlPoint, TransferFunction};
+use std::path::{Path, PathBuf};
+
+/// One case against the volume alone.
+#[derive(Clone, Debug)]
+pub struct LayerPoint {
+    pub name: &'static str,
+    /// Layers the renderer draws (an empty one is left out).
+    pub drawn: usize,
+    pub render_ms: f64,
+    pub time_ratio: f64,
+    /// RMSE against the volume alone's image, and whether it equals it
+    /// bit for bit.
+    pub rmse: f64,
+    pub equal: bool,
+}
+
+/// Writes `tf` into `dir` as `name` and returns the path.
+fn write_tf(dir: &Path, name: &str, tf: &TransferFunction) -> Result<PathBuf> {
+    let p = dir.join(name);
+    std::fs::write(&p, toml::to_string(tf)?)?;
+    Ok(p)
+}
+
+/// Runs the study on `shot` at `cfg` (`out` holds the layers' transfer
+/// functions), `rounds` timed rounds.
+pub fn run(shot: Shot, cfg: &RenderConfig, rounds: usize, out: &Path) -> Result<Vec<LayerPoint>> {
+    let layer = |tf: PathBuf| Layer {
+        volume: shot.db.to_path_buf(),
+        transfer_function: tf,
+        opacity: 1.0,
+        visible: true,
+        view_opacity: None,
+    };
+    let p = shot.tf.points();
+    let top = p.last().map_or(1.0, |q| q.value);
+    let empty = TransferFunction::from_points(vec![
+        ControlPoint::new(top + 1.0, [1.0, 0.0, 0.0], 0.0),
+        ControlPoint::new(top + 2.0, [1.0, 0.0, 0.0], 1.0),
+    ])?;
+    let empty = write_tf(out, "layers-empty.toml", &empty)?;
+    let half = shot.tf.scaled_extinction(0.5);
+    let third = shot.tf.scaled_extinction(1.0 / 3.0);
+    let half_file = write_tf(out, "layers-half.toml", &half)?;
+    let third_file = write_tf(out, "layers-third.toml", &third)?;
+    let cases: Vec<(&'static str, &TransferFunction, Vec<Layer>)> = vec![
+        ("the volume alone", shot.tf, vec![]),
+        ("an empty layer", shot.tf, vec![layer(empty)]),
+        (
+            "2 aligned media (1 layer), 1/2 each",
+            &half,
+            vec![layer(half_file)],
+        ),
+        (
+            "3 aligned media (2 layers), 1/3 each",
+            &third,
+            vec![layer(third_file.clone()), layer(third_file)],
+        ),
+    ];
+    let mut renderers = Vec::new();
+    let mut images = Vec::new();
+    for (_, tf, layers) in &cases {
+        let mut r =
+            Renderer::with_layers(shot.db, layers, cfg, &AdapterRequest::from_env(None, 0))?;
+        r.set_transfer_function(1, tf)?;
+        let f = r.converge(shot.placement, &[*shot.view], cfg, measure::CONVERGE_FRAMES)?;
+        images.push(f.images.into_iter().next().expect("one view"));
+        renderers.push(r);
+    }
+    let rounds = rounds.max(3);
+    let mut ms = vec![Vec::new(); cases.len()];
+    for round in 0..rounds {
+        for i in measure::round_order(round, cases.len()) {
+            let tf = cases[i].1;
+            let (f, _) = timed_frame(
+                &mut renderers[i],
+                200 + round as u64,
+                Shot { tf, ..shot },
+                cfg,
+            )?;
+            ms[i].push(f.stats.render_ms);
+        }
+    }
+    let base: Vec<[f64; 4]> = images[0].iter().map(|p| p.map(f64::from)).collect();
+    let mut points: Vec<LayerPoint> = Vec::new();
+    for (i, (name, _, _)) in cases.iter().enumerate() {
+        let render_ms = measure::median(&mut ms[i]);
+        let e = parallax_backend::metric::image_error(&images[i], &base);
+        points.push(LayerPoint {
+            name,
+            drawn: renderers[i].layer_count(),
+            render_ms,
+            time_ratio: render_ms / points.first().map_or(render_ms, |b| b.render_ms),
+            rmse: e.rmse,
+            equal: images[i]
+                .iter()
+                .zip(&images[0])
+                .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)),
+        });
+    }
+    Ok(points)
+}
+
+/// The table on stdout.
+pub fn print(points: &[LayerPoint]) {
+    println!(
+        "{:<40} {:>6} {:>10} {:>8} {:>10} {:>6}",
+        "case", "layers", "render ms", "ratio", "RMSE", "equal"
+    );
+    for p in points {
+        println!(
+            "{:<40} {:>6} {:>10.1} {:>8.2} {:>10.2e} {:>6}",
+            p.name, p.drawn, p.render_ms, p.time_ratio, p.rmse, p.equal
+        );
+    }
+}
+
+/// DIR/layers.csv.
+pub fn write_csv(path: &Path, points: &[LayerPoint]) -> Result<()> {
+    write_table(
+        path,
+        "case,layers_drawn,render_ms,time_ratio,rmse_vs_volume,equal",
+        points.iter().map(|p| {
+            format!(
+                "{},{},{:.3},{:.3},{:.3e},{}",
+                p.name, p.drawn, p.render_ms, p.time_ratio, p.rmse, p.equal
+            )
+        }),
+    )
+}

@@ -1,0 +1,127 @@
+// shared/layers.wgsl: registered layers (`[[layer]]`, G10 §4), combined with
+// the volume as media.
+//
+// A scene's layers lie on the volume's octree, so one traversal serves all:
+// the pool's texels hold the volume's value (.r) and each layer's (.g, .b,
+// .a), interpolated at once, and a slot's mask (the fourth word of its
+// range) says which of them hold data there. Where media overlap their
+// extinctions add and their extinction-weighted emissions add. A segment's
+// optics are the averages of τ and k̃ = τ·c over it (G10 Eq. 2), so the
+// summed medium's are the sums of each medium's averages, exactly: two
+// layers of one volume with half its extinction each give the volume's
+// segment. Each layer's averages come from its own pre-integration table
+// (after the volume's in `tf_table`), scaled by the layer's opacity and by
+// its view-dependent factor (G10 §4: "controlling a layer's opacity as a
+// function of the view direction"). LAYERS (the chain module) is their
+// count; without layers none of this is compiled in.
+
+#import bindings
+#import preint
+
+var<private> layer_p: array<LayerParams, 3>;
+
+// The layers' constants, copied once per ray like the frame's.
+fn load_layers() {
+    if (LAYERS > 0u) {
+        layer_p = layer_uniform;
+    }
+}
+
+// Bin j's average over [j + ta, j + tb] in layer `p`'s table
+// (`bin_average`'s).
+fn layer_bin_average(p: LayerParams, j: u32, ta: f32, tb: f32) -> vec4<f32> {
+    return quadratic_average(tf_entry(p.at.x + j), tf_entry(p.at.y + j),
+                             tf_entry(p.at.x + j + 1u), ta, tb);
+}
+
+// Where pyramid level k of a table of n bins starts (common/src/tf/preint.rs
+// `gpu_layout`): after the n + 1 nodes and the levels below it.
+fn layer_level_offset(n: u32, k: u32) -> u32 {
+    var o = n + 1u;
+    for (var i = 0u; i < k; i = i + 1u) {
+        o = o + (n >> i);
+    }
+    return o;
+}
+
+// The average of (τ, k̃) over the data segment [sa, sb] in layer `p`'s table:
+// `segment_average`'s sum, whole bins by the running integral where the
+// table has one, else by the dyadic pyramid.
+fn layer_average(p: LayerParams, sa: f32, sb: f32) -> vec4<f32> {
+    let n = u32(p.table.z);
+    var ua = clamp((sa - p.table.x) * p.table.y, 0.0, f32(n));
+    var ub = clamp((sb - p.table.x) * p.table.y, 0.0, f32(n));
+    if (ua > ub) {
+        let t = ua;
+        ua = ub;
+        ub = t;
+    }
+    let ja = min(u32(ua), n - 1u);
+    if (ub <= f32(ja + 1u)) {
+        return layer_bin_average(p, ja, ua - f32(ja), min(ub - f32(ja), 1.0));
+    }
+    let jb = min(u32(ub), n);
+    var sum = (f32(ja + 1u) - ua) * layer_bin_average(p, ja, ua - f32(ja), 1.0);
+    var lo = ja + 1u;
+    if (p.at.z != 0u) {
+        let a = p.at.z + 2u * lo;
+        let b = p.at.z + 2u * jb;
+        sum = sum + (tf_entry(b) - tf_entry(a)) + (tf_entry(b + 1u) - tf_entry(a + 1u));
+        lo = jb;
+    }
+    let top = p.at.w - 1u;
+    while (lo < jb) {
+        var k = top;
+        if (lo != 0u) {
+            k = min(countTrailingZeros(lo), top);
+        }
+        while ((1u << k) > jb - lo) {
+            k = k - 1u;
+        }
+        sum = sum + tf_entry(p.at.x + layer_level_offset(n, k) + (lo >> k));
+        lo = lo + (1u << k);
+    }
+    if (jb < n) {
+        sum = sum + (ub - f32(jb)) * layer_bin_average(p, jb, 0.0, ub - f32(jb));
+    }
+    return sum / (ub - ua);
+}
+
+// Each layer's weight along a ray of direction `d` (volume space): its
+// opacity, times the smoothstep of the ray's angle to its axis where it has
+// a view-dependent opacity.
+fn layer_weights(d: vec3<f32>) -> vec3<f32> {
+    var w = vec3<f32>(0.0);
+    let u = normalize(d);
+    for (var k = 0u; k < LAYERS; k = k + 1u) {
+        let p = layer_p[k];
+        var f = p.table.w;
+        if (p.axis.w > 0.5) {
+            let theta = acos(clamp(dot(u, p.axis.xyz), -1.0, 1.0));
+            let t = clamp((theta - p.angles.x) * p.angles.y, 0.0, 1.0);
+            f = f * t * t * (3.0 - 2.0 * t);
+        }
+        w[k] = f;
+    }
+    return w;
+}
+
+// What a segment knows of the layers: their values at its two ends, and
+// which media have data at both (bit 0 the volume, bit k layer k).
+struct LayerSeg {
+    a: vec3<f32>,
+    b: vec3<f32>,
+    mask: u32,
+}
+
+// The summed medium's (τ, k̃) averages over a segment: the volume's `vol`
+// and each layer's, weighted by `w` (`layer_weights`), where each has data.
+fn layered_average(vol: vec4<f32>, ls: LayerSeg, w: vec3<f32>) -> vec4<f32> {
+    var sum = select(vec4<f32>(0.0), vol, (ls.mask & 1u) != 0u);
+    for (var k = 0u; k < LAYERS; k = k + 1u) {
+        if (((ls.mask >> (k + 1u)) & 1u) != 0u && w[k] > 0.0) {
+            sum = sum + w[k] * layer_average(layer_p[k], ls.a[k], ls.b[k]);
+        }
+    }
+    return sum;
+}
