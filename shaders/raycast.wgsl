@@ -476,6 +476,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
         layer_w = layer_weights(d);
     }
     var lay_prev = vec3<f32>(0.0);
+    var le_prev: array<TfEnd, 3>;
     var mask_prev = 0u;
 
     var acc = Acc(vec3<f32>(0.0), 0.0, 0.0);
@@ -532,10 +533,16 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
         let t_exit = walk.t_exit;
         var bent = false;
         let leaf = make_leaf(walk.node, walk.level, walk.cell, walk.slot, walk.values);
-        // Which media have data in this leaf (the slot's mask).
+        // Which media have data in this leaf (the slot's mask), and the
+        // layers' ranges (value = lo + span · stored).
         var mask = 0u;
+        var lay_lo = vec3<f32>(0.0);
+        var lay_span = vec3<f32>(1.0);
         if (LAYERS > 0u) {
             mask = bitcast<u32>(slot_range(walk.slot).w);
+            let r = layer_ranges(walk.slot);
+            lay_lo = vec3<f32>(r[0].x, r[0].z, r[1].x);
+            lay_span = vec3<f32>(r[0].y, r[0].w, r[1].y);
         }
         // Multilevel sampling blends in coarser levels only in leaves
         // that the view needs coarser somewhere along the ray (the
@@ -577,8 +584,9 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             let tn = next_sample(&ray, t, h, &k, tc, t_exit);
             if (LAYERS > 0u) {
                 let v = sample_layered(leaf, o + d * tn);
-                s_prev = v.x;
-                lay_prev = v.yzw;
+                s_prev = leaf.range.x + leaf.range.y * v.x;
+                lay_prev = lay_lo + lay_span * v.yzw;
+                le_prev = layer_ends(lay_prev);
                 mask_prev = mask;
             } else {
                 s_prev = sample_levels(lv, blend, o + d * tn);
@@ -622,8 +630,8 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 tn = next_sample(&ray, t, h, &k, tc, t_exit);
                 if (LAYERS > 0u) {
                     let v = sample_layered(leaf, o + d * tn);
-                    s = v.x;
-                    lay = v.yzw;
+                    s = leaf.range.x + leaf.range.y * v.x;
+                    lay = lay_lo + lay_span * v.yzw;
                 } else {
                     s = sample_levels(lv, blend, o + d * tn);
                 }
@@ -632,6 +640,10 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             var e: TfEnd;
             if (!ISO) {
                 e = tf_end(s);
+            }
+            var le: array<TfEnd, 3>;
+            if (LAYERS > 0u) {
+                le = layer_ends(lay);
             }
             // A segment with an end that lacks data adds nothing.
             if (NO_DATA && !ISO && !(has_data(s) && has_data(s_prev))) {
@@ -654,10 +666,12 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 continue;
             }
             let smp = composite_segment(&acc, lv, blend, o, d, tc, tn, s_prev, s, e_prev, e,
-                                        LayerSeg(lay_prev, lay, mask & mask_prev), layer_w);
+                                        LayerSeg(lay_prev, lay, le_prev, le, mask & mask_prev),
+                                        layer_w);
             s_prev = s;
             e_prev = e;
             lay_prev = lay;
+            le_prev = le;
             mask_prev = mask;
             tc = tn;
             if (record_depth && depth_t < 0.0 && acc.alpha >= 0.5) {

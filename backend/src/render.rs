@@ -62,7 +62,11 @@ fn caches(
 ) -> Result<(Raycaster, BrickPool, Loader)> {
     let layout = *db.layout();
     let channels = BrickPool::channels_for(layers.len());
-    let float = db.encoding() != BrickEncoding::U8Range || channels > 1;
+    // 8-bit codes where every medium's database holds them (filtered by
+    // the texture unit), else f32.
+    let float = std::iter::once(&**db)
+        .chain(layers.iter().map(|l| &*l.db))
+        .any(|d| d.encoding() != BrickEncoding::U8Range);
     let filtering = match cfg.interpolation {
         Interpolation::Hardware => Filtering::Hardware,
         Interpolation::Exact => Filtering::Exact,
@@ -567,6 +571,7 @@ impl Renderer {
                 iso: cfg.mode == Mode::Iso,
                 enhancers: acting.iter().map(|t| t.enhancer()).collect(),
                 layers: self.layers.len() as u32,
+                layer_end: self.tf.as_ref().is_some_and(|t| t.table.layers_end_path()),
             },
             gamma: if cfg.mode == Mode::Mimda {
                 cfg.gamma as f32
@@ -943,6 +948,14 @@ impl Renderer {
         let fills: Vec<f32> = std::iter::once(self.db.summary.value_min)
             .chain(self.layers.iter().map(|l| l.fill))
             .collect();
+        // A macrocell is empty where every medium with data there is: the
+        // volume's under its function and the band pickers' windows, each
+        // layer's under its own.
+        let layers = &self.layers;
+        let empty = |ch: usize, lo: f64, hi: f64| match ch {
+            0 => tf.empty.is_empty(lo, hi) || outside_windows(windows, lo, hi),
+            k => layers[k - 1].empty.is_empty(lo, hi),
+        };
         for u in &cut.uploads {
             let v = self.db.node(u.key).map_or(0.0, |n| n.variance);
             let norm = if v_hi > v_lo {
@@ -951,33 +964,27 @@ impl Renderer {
                 0.0
             };
             if layered {
-                // Macrocells are not marked in a layered pool (the kernel
-                // marches every cell).
                 self.pool
                     .upload_layered(&self.gpu, u.slot, &u.data, &fills, norm);
-                continue;
+            } else {
+                self.pool.upload(
+                    &self.gpu,
+                    u.slot,
+                    &u.data.values,
+                    u.data.cells.as_deref(),
+                    norm,
+                );
             }
-            self.pool.upload(
-                &self.gpu,
-                u.slot,
-                &u.data.values,
-                u.data.cells.as_deref(),
-                norm,
-            );
             if cfg.macrocells && !self.cells_stale {
-                self.pool.mark_cells(u.slot, &|lo, hi| {
-                    tf.empty.is_empty(lo, hi) || outside_windows(windows, lo, hi)
-                });
+                self.pool.mark_cells(u.slot, &empty);
             }
         }
         // A scene without macrocells pays nothing for them but the ranges
         // taken at upload; switched on, every resident brick is marked.
-        if !cfg.macrocells || layered {
+        if !cfg.macrocells {
             self.cells_stale = true;
         } else if std::mem::take(&mut self.cells_stale) {
-            self.pool.mark_all_cells(&|lo, hi| {
-                tf.empty.is_empty(lo, hi) || outside_windows(windows, lo, hi)
-            });
+            self.pool.mark_all_cells(&empty);
         }
         self.pool.flush_cells(&self.gpu);
         Ok(())

@@ -791,6 +791,7 @@ fn every_shipped_scene_loads() {
             iso: s.render.mode == Mode::Iso,
             enhancers: s.tools.iter().map(Tool::enhancer).collect(),
             layers: s.layers.len() as u32,
+            layer_end: !s.layers.is_empty(),
         };
         assert!(all.contains(&key), "{}: {key:?}", p.display());
         n += 1;

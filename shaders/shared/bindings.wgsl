@@ -199,14 +199,27 @@ fn tf_entry(i: u32) -> vec4<f32> {
     return bitcast<vec4<f32>>(texel_at(tf_table, i));
 }
 
-// A pool slot's value range (min, max − min, variance, 0).
+// Texels of a pool slot's entry (backend/src/raycast/pool.rs SLOT_TEXELS):
+// its range, its macrocells' bits, the registered layers' ranges.
+const SLOT_TEXELS: u32 = 7u;
+
+// A pool slot's value range (min, max − min, variance, and in a layered
+// pool the mask of the media with data as bits).
 fn slot_range(slot: u32) -> vec4<f32> {
-    return bitcast<vec4<f32>>(texel_at(slot_table, 5u * slot));
+    return bitcast<vec4<f32>>(texel_at(slot_table, SLOT_TEXELS * slot));
+}
+
+// A layered slot's layers' ranges: (min, max − min) of layers 1 and 2,
+// then of layer 3 (value = min + (max − min) · stored).
+fn layer_ranges(slot: u32) -> array<vec4<f32>, 2> {
+    let t = SLOT_TEXELS * slot + SLOT_TEXELS - 2u;
+    return array<vec4<f32>, 2>(bitcast<vec4<f32>>(texel_at(slot_table, t)),
+                               bitcast<vec4<f32>>(texel_at(slot_table, t + 1u)));
 }
 
 // Whether macrocell `k` of a pool slot is empty.
 fn cell_empty(slot: u32, k: u32) -> bool {
-    let t = texel_at(slot_table, 5u * slot + 1u + k / 128u);
+    let t = texel_at(slot_table, SLOT_TEXELS * slot + 1u + k / 128u);
     let w = (k / 32u) % 4u;
     let word = select(select(t.x, t.y, w == 1u), select(t.z, t.w, w == 3u), w >= 2u);
     return ((word >> (k % 32u)) & 1u) != 0u;

@@ -87,6 +87,23 @@ fn layer_average(p: LayerParams, sa: f32, sb: f32) -> vec4<f32> {
     return sum / (ub - ua);
 }
 
+// A sample's end in layer `p`'s table (`tf_end`'s; LAYER_END, a constant of
+// the chain module: every layer's table allows the end path).
+fn layer_end(p: LayerParams, s: f32) -> TfEnd {
+    return end_in(p.at.x, p.at.y, p.at.z, p.table.x, p.table.y, u32(p.table.z), s);
+}
+
+// A sample's ends in every layer's table (LAYER_END; none otherwise).
+fn layer_ends(lay: vec3<f32>) -> array<TfEnd, 3> {
+    var out: array<TfEnd, 3>;
+    if (LAYER_END) {
+        for (var k = 0u; k < LAYERS; k = k + 1u) {
+            out[k] = layer_end(layer_p[k], lay[k]);
+        }
+    }
+    return out;
+}
+
 // Each layer's weight along a ray of direction `d` (volume space): its
 // opacity, times the smoothstep of the ray's angle to its axis where it has
 // a view-dependent opacity.
@@ -106,22 +123,37 @@ fn layer_weights(d: vec3<f32>) -> vec3<f32> {
     return w;
 }
 
-// What a segment knows of the layers: their values at its two ends, and
-// which media have data at both (bit 0 the volume, bit k layer k).
+// What a segment knows of the layers: their values at its two ends (and
+// with LAYER_END their table ends), and which media have data at both (bit
+// 0 the volume, bit k layer k).
 struct LayerSeg {
     a: vec3<f32>,
     b: vec3<f32>,
+    ea: array<TfEnd, 3>,
+    eb: array<TfEnd, 3>,
     mask: u32,
+}
+
+// Layer k's averages over the segment, from the ends or from the table.
+fn layer_term(k: u32, a: f32, b: f32, ea: TfEnd, eb: TfEnd) -> vec4<f32> {
+    if (LAYER_END) {
+        return end_average(ea, eb);
+    }
+    return layer_average(layer_p[k], a, b);
 }
 
 // The summed medium's (τ, k̃) averages over a segment: the volume's `vol`
 // and each layer's, weighted by `w` (`layer_weights`), where each has data.
 fn layered_average(vol: vec4<f32>, ls: LayerSeg, w: vec3<f32>) -> vec4<f32> {
     var sum = select(vec4<f32>(0.0), vol, (ls.mask & 1u) != 0u);
-    for (var k = 0u; k < LAYERS; k = k + 1u) {
-        if (((ls.mask >> (k + 1u)) & 1u) != 0u && w[k] > 0.0) {
-            sum = sum + w[k] * layer_average(layer_p[k], ls.a[k], ls.b[k]);
-        }
+    if (LAYERS > 0u && (ls.mask & 2u) != 0u && w.x > 0.0) {
+        sum = sum + w.x * layer_term(0u, ls.a.x, ls.b.x, ls.ea[0], ls.eb[0]);
+    }
+    if (LAYERS > 1u && (ls.mask & 4u) != 0u && w.y > 0.0) {
+        sum = sum + w.y * layer_term(1u, ls.a.y, ls.b.y, ls.ea[1], ls.eb[1]);
+    }
+    if (LAYERS > 2u && (ls.mask & 8u) != 0u && w.z > 0.0) {
+        sum = sum + w.z * layer_term(2u, ls.a.z, ls.b.z, ls.ea[2], ls.eb[2]);
     }
     return sum;
 }

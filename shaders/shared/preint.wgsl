@@ -154,18 +154,26 @@ fn analytic_average(sa: f32, sb: f32) -> vec4<f32> {
 
 
 fn tf_end(s: f32) -> TfEnd {
-    var e: TfEnd;
     if (!END_PREINT) {
+        var e: TfEnd;
         return e;
     }
-    let n = u32(frame.tf.z);
-    e.u = clamp((s - frame.tf.x) * frame.recip.w, 0.0, f32(n));
+    return end_in(0u, frame.tf_mids.x, frame.counts.w, frame.tf.x, frame.recip.w,
+                  u32(frame.tf.z), s);
+}
+
+// One end in a table part at `base` with its bin midpoints at `mids` and its
+// running integral at `prefix`, over n bins from vmin (`recip`: 1 / the bin
+// width): the volume's (`tf_end`) or a registered layer's (`layer_end`).
+fn end_in(base: u32, mids: u32, prefix: u32, vmin: f32, recip: f32, n: u32, s: f32) -> TfEnd {
+    var e: TfEnd;
+    e.u = clamp((s - vmin) * recip, 0.0, f32(n));
     e.j = min(u32(e.u), n - 1u);
     let x = e.u - f32(e.j);
-    e.a = tf_entry(e.j);
-    e.b = tf_entry(e.j + 1u);
-    e.m = tf_entry(frame.tf_mids.x + e.j);
-    let p = frame.counts.w + 2u * e.j;
+    e.a = tf_entry(base + e.j);
+    e.b = tf_entry(base + e.j + 1u);
+    e.m = tf_entry(mids + e.j);
+    let p = prefix + 2u * e.j;
     e.hi = tf_entry(p);
     e.lo = tf_entry(p + 1u);
     e.below = quadratic_integral(e.a, e.m, e.b, x);

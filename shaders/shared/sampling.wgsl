@@ -142,9 +142,10 @@ fn sample_brick(leaf: Leaf, p: vec3<f32>) -> f32 {
     return leaf.range.x + leaf.range.y * v;
 }
 
-// The volume's and its registered layers' values at p (LAYERS > 0: a float
-// pool of two or four channels, no no-data voxels), every channel of a
-// texel interpolated at once, by the texture unit or by eight loads.
+// The volume's and its registered layers' stored values at p (LAYERS > 0: a
+// pool of two or four channels, f32 or 8-bit codes, no no-data voxels),
+// every channel of a texel interpolated at once, by the texture unit or by
+// eight loads; each channel's range turns them into data values.
 fn sample_layered(leaf: Leaf, p: vec3<f32>) -> vec4<f32> {
     let side = f32(frame.pool.w);
     let local = clamp(p * leaf.to_local + leaf.shift, vec3<f32>(0.0), vec3<f32>(side - 1.0));

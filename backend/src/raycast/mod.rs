@@ -269,8 +269,7 @@ impl Raycaster {
     fn cull<'a>(&self, inputs: &RenderInputs<'a>) -> tiles::Cull<'a> {
         let s = inputs.settings;
         let plain = s.kernel.skips_empty_space();
-        let macrocells =
-            s.macrocells && plain && inputs.pool.cells.per_axis > 0 && s.kernel.layers == 0;
+        let macrocells = s.macrocells && plain && inputs.pool.cells.per_axis > 0;
         let multilevel = s.multilevel.is_some() && !s.kernel.iso;
         match (plain, macrocells && !multilevel) {
             _ if !s.tile_culling => tiles::Cull::Off,
@@ -384,11 +383,9 @@ impl Raycaster {
             pool, tf, settings, ..
         } = *inputs;
         let k = &settings.kernel;
-        // Registered layers: their empty cells are not marked, and the
-        // look-ahead fetches the volume's value alone.
+        // Registered layers: the look-ahead fetches the volume's value alone.
         let layered = k.layers > 0;
-        let macrocells =
-            settings.macrocells && k.skips_empty_space() && pool.cells.per_axis > 0 && !layered;
+        let macrocells = settings.macrocells && k.skips_empty_space() && pool.cells.per_axis > 0;
         let closed_pieces = tf
             .closed_pieces
             .filter(|_| settings.preintegration == Preintegration::Analytic && !k.iso);

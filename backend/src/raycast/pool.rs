@@ -14,9 +14,10 @@ pub const NO_DATA_VALUE: f32 = 3.0e38;
 pub const CELL_WORDS: u32 = 16;
 
 /// Texels of one slot's entry in the slot table (WGSL `slot_range`,
-/// `cell_empty`): its range (a vec4 of f32 bits), then its cell bits, four
-/// words a texel.
-pub const SLOT_TEXELS: u64 = 1 + CELL_WORDS as u64 / 4;
+/// `cell_empty`, `layer_ranges`): its range (a vec4 of f32 bits), its cell
+/// bits, four words a texel, then the registered layers' ranges (two
+/// texels, used by layered pools only).
+pub const SLOT_TEXELS: u64 = 1 + CELL_WORDS as u64 / 4 + 2;
 
 /// Empty-space skipping inside bricks (L12 §4.1): each slot's B³ core is
 /// cut into C³ macrocells of M³ voxels, and each cell keeps the value range
@@ -37,8 +38,12 @@ pub struct Macrocells {
     /// Voxels per cell side M.
     pub voxels: u32,
     /// Per slot, C³ (lo, hi) data-value ranges (lo > hi: the cell has no
-    /// data at all).
+    /// data at all), per channel of a layered pool (cell-major).
     ranges: Vec<[f32; 2]>,
+    /// Values per texel (registered layers: one per medium).
+    channels: usize,
+    /// Per slot, the channels that hold data (bit k: channel k).
+    masks: Vec<u32>,
     /// Per slot, [`CELL_WORDS`] words of empty bits.
     bits: Vec<u32>,
     /// Slots whose bits changed since the last flush, or all of them.
@@ -76,6 +81,8 @@ impl Macrocells {
             per_axis,
             voxels,
             ranges: vec![[1.0, 0.0]; slots as usize * n],
+            channels: 1,
+            masks: vec![1; slots as usize],
             bits,
             dirty: Vec::new(),
             all_dirty: false,
@@ -95,6 +102,15 @@ impl Macrocells {
         self.ranges[slot as usize * n..(slot as usize + 1) * n].copy_from_slice(cells);
     }
 
+    /// The ranges of channel `ch` of a layered slot (cell-major, channels
+    /// interleaved).
+    fn set_channel(&mut self, slot: u32, ch: usize, cells: &[[f32; 2]]) {
+        let (n, c) = (self.cells(), self.channels);
+        for (k, r) in cells.iter().enumerate() {
+            self.ranges[(slot as usize * n + k) * c + ch] = *r;
+        }
+    }
+
     fn cells(&self) -> usize {
         (self.per_axis * self.per_axis * self.per_axis) as usize
     }
@@ -107,21 +123,27 @@ impl Macrocells {
         self.set_stored(slot, &crate::store::cells::ranges(b, value));
     }
 
-    /// Marks the empty cells of `slot` under `empty(lo, hi)`.
-    fn mark(&mut self, slot: u32, empty: &dyn Fn(f64, f64) -> bool) {
-        let n = self.cells();
+    /// Marks the empty cells of `slot` under `empty(channel, lo, hi)`: in
+    /// a layered slot a cell is empty where every channel with data is.
+    fn mark(&mut self, slot: u32, empty: &dyn Fn(usize, f64, f64) -> bool) {
+        let (n, c) = (self.cells(), self.channels);
+        let mask = self.masks[slot as usize];
         let words =
             &mut self.bits[(slot * CELL_WORDS) as usize..((slot + 1) * CELL_WORDS) as usize];
         words.fill(0);
-        for (i, r) in self.ranges[slot as usize * n..(slot as usize + 1) * n]
-            .iter()
+        for (i, cell) in self.ranges[slot as usize * n * c..(slot as usize + 1) * n * c]
+            .chunks_exact(c)
             .enumerate()
         {
-            let [lo, hi] = r.map(f64::from);
-            // Widened by a little more than the kernel's f32 rounding of
-            // its values: never empty where a sample could fall outside.
-            let pad = 1e-5 * (lo.abs().max(hi.abs()) + (hi - lo).abs()) + f64::MIN_POSITIVE;
-            if lo > hi || empty(lo - pad, hi + pad) {
+            let all = cell.iter().enumerate().all(|(ch, r)| {
+                let [lo, hi] = r.map(f64::from);
+                // Widened by a little more than the kernel's f32 rounding
+                // of its values: never empty where a sample could fall
+                // outside.
+                let pad = 1e-5 * (lo.abs().max(hi.abs()) + (hi - lo).abs()) + f64::MIN_POSITIVE;
+                (mask >> ch) & 1 == 0 || lo > hi || empty(ch, lo - pad, hi + pad)
+            });
+            if all {
                 words[i / 32] |= 1 << (i % 32);
             }
         }
@@ -165,13 +187,9 @@ impl BrickPool {
         Self::layered_slot_bytes(side, float, 1)
     }
 
-    /// Bytes one slot of `channels` values per texel takes (more than one:
-    /// f32).
+    /// Bytes one slot of `channels` values per texel takes.
     pub fn layered_slot_bytes(side: u32, float: bool, channels: u32) -> u64 {
-        let texel = match channels {
-            1 if !float => 1,
-            c => 4 * c as u64,
-        };
+        let texel = channels as u64 * if float { 4 } else { 1 };
         side as u64 * side as u64 * side as u64 * texel
     }
 
@@ -204,8 +222,9 @@ impl BrickPool {
         Self::with_channels(gpu, slots, side, float, 1)
     }
 
-    /// A pool of `channels` values per texel (more than one: f32, the scene
-    /// volume's in the first and its layers' in the others).
+    /// A pool of `channels` values per texel (the scene volume's in the
+    /// first and its layers' in the others), f32 or 8-bit codes against
+    /// each brick's own range per channel.
     pub fn with_channels(
         gpu: &Gpu,
         slots: u32,
@@ -230,12 +249,13 @@ impl BrickPool {
             grid[a] += 1;
         }
         let format = match (float, channels) {
-            (_, 2) => wgpu::TextureFormat::Rg32Float,
-            (_, 4) => wgpu::TextureFormat::Rgba32Float,
+            (true, 2) => wgpu::TextureFormat::Rg32Float,
+            (true, 4) => wgpu::TextureFormat::Rgba32Float,
             (true, _) => wgpu::TextureFormat::R32Float,
+            (false, 2) => wgpu::TextureFormat::Rg8Unorm,
+            (false, 4) => wgpu::TextureFormat::Rgba8Unorm,
             (false, _) => wgpu::TextureFormat::R8Unorm,
         };
-        let float = float || channels > 1;
         let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("brick pool"),
             size: wgpu::Extent3d {
@@ -263,7 +283,12 @@ impl BrickPool {
         let cells = Macrocells {
             per_axis,
             voxels,
-            ranges: vec![[1.0, 0.0]; total as usize * (per_axis as usize).pow(3)],
+            ranges: vec![
+                [1.0, 0.0];
+                total as usize * (per_axis as usize).pow(3) * channels as usize
+            ],
+            channels: channels as usize,
+            masks: vec![1; total as usize],
             bits: vec![0; (total * CELL_WORDS) as usize],
             dirty: Vec::new(),
             all_dirty: false,
@@ -291,7 +316,7 @@ impl BrickPool {
 
     /// Marks the empty macrocells of `slot` (just uploaded) under the
     /// transfer function's emptiness test.
-    pub fn mark_cells(&mut self, slot: u32, empty: &dyn Fn(f64, f64) -> bool) {
+    pub fn mark_cells(&mut self, slot: u32, empty: &dyn Fn(usize, f64, f64) -> bool) {
         if self.cells.per_axis > 0 {
             self.cells.mark(slot, empty);
         }
@@ -299,7 +324,7 @@ impl BrickPool {
 
     /// Marks every filled slot's empty macrocells anew (a new transfer
     /// function).
-    pub fn mark_all_cells(&mut self, empty: &dyn Fn(f64, f64) -> bool) {
+    pub fn mark_all_cells(&mut self, empty: &dyn Fn(usize, f64, f64) -> bool) {
         if self.cells.per_axis == 0 {
             return;
         }
@@ -342,9 +367,13 @@ impl BrickPool {
 
     /// Copies a node's bricks of the scene volume and its registered layers
     /// ([`crate::store::LayerBricks`]) into a slot, one channel each (zeros
-    /// where a database has none; a no-data voxel takes `fills`' value of
-    /// its channel), with the mask of the channels that hold data in the
-    /// slot table's fourth word (the kernel composites only those).
+    /// where a medium has none; a no-data voxel takes `fills`' value of its
+    /// channel): f32, or 8-bit codes against each channel's own range, the
+    /// volume's in the slot's range, the layers' in the slot's last two
+    /// texels (`layer_ranges`). The mask of the channels that hold data
+    /// goes in the range's fourth word (the kernel composites only those),
+    /// and each channel's macrocell ranges are kept (a cell is empty where
+    /// every medium with data is).
     pub fn upload_layered(
         &mut self,
         gpu: &Gpu,
@@ -362,30 +391,78 @@ impl BrickPool {
             .layered
             .as_ref()
             .expect("a layered pool takes layered bricks");
-        let fill = |k: usize, v: f32| if v.is_nan() { fills[k] } else { v };
-        let mut texels = vec![0f32; n * c];
-        if lb.main {
-            for (t, &v) in texels.chunks_exact_mut(c).zip(&brick.values) {
-                t[0] = fill(0, v);
-            }
-        }
-        for (k, layer) in lb.layers.iter().enumerate() {
-            if let Some(values) = layer {
-                for (t, &v) in texels.chunks_exact_mut(c).zip(values) {
-                    t[1 + k] = fill(1 + k, v);
+        let media: Vec<Option<Vec<f32>>> = std::iter::once(lb.main.then_some(&brick.values))
+            .chain(lb.layers.iter().map(Option::as_ref))
+            .enumerate()
+            .map(|(k, v)| {
+                v.map(|v| {
+                    v.iter()
+                        .map(|&x| if x.is_nan() { fills[k] } else { x })
+                        .collect()
+                })
+            })
+            .collect();
+        // Each channel's range (value = lo + span · stored) and the values
+        // the kernel interpolates.
+        let mut ranges = [[0.0f32, 1.0]; 4];
+        let mut decoded: Vec<Option<Vec<f32>>> = vec![None; c];
+        let bytes: Vec<u8> = if self.float {
+            let mut texels = vec![0f32; n * c];
+            for (k, m) in media.iter().enumerate() {
+                if let Some(v) = m {
+                    for (t, &x) in texels.chunks_exact_mut(c).zip(v) {
+                        t[k] = x;
+                    }
                 }
             }
+            for (k, m) in media.into_iter().enumerate() {
+                decoded[k] = m;
+            }
+            bytemuck::cast_slice(&texels).to_vec()
+        } else {
+            let mut codes = vec![0u8; n * c];
+            for (k, m) in media.iter().enumerate() {
+                if let Some(v) = m {
+                    let (q, r) = quantise(v, false);
+                    for (t, &x) in codes.chunks_exact_mut(c).zip(&q) {
+                        t[k] = x;
+                    }
+                    let scale = r[1] / 255.0;
+                    decoded[k] = Some(q.iter().map(|&x| r[0] + scale * x as f32).collect());
+                    ranges[k] = r;
+                }
+            }
+            codes
+        };
+        let bpp = c as u32 * if self.float { 4 } else { 1 };
+        self.write_slot(gpu, slot, &bytes, bpp);
+        let mask = lb.mask();
+        if self.cells.per_axis > 0 {
+            self.cells.masks[slot as usize] = mask;
+            let b = s as usize - 2 * crate::store::OVERLAP;
+            let none = vec![[1.0f32, 0.0]; self.cells.cells()];
+            for (k, d) in decoded.iter().enumerate() {
+                let cells = match d {
+                    Some(v) => crate::store::cells::ranges_of(b, v),
+                    None => none.clone(),
+                };
+                self.cells.set_channel(slot, k, &cells);
+            }
         }
-        self.write_slot(gpu, slot, bytemuck::cast_slice(&texels), 4 * c as u32);
         self.filled[slot as usize] = true;
-        self.values[slot as usize] = [0.0, 1.0];
-        let [lo, span, var] = [0.0f32, 1.0, variance.clamp(0.0, 1.0)].map(f32::to_bits);
+        self.values[slot as usize] = ranges[0];
+        let [lo, span, var] =
+            [ranges[0][0], ranges[0][1], variance.clamp(0.0, 1.0)].map(f32::to_bits);
+        let r = |k: usize| ranges[k].map(f32::to_bits);
+        let (r1, r2, r3) = (r(1), r(2), r(3));
+        self.slots
+            .write(gpu, slot as u64 * SLOT_TEXELS, &[[lo, span, var, mask]]);
         self.slots.write(
             gpu,
-            slot as u64 * SLOT_TEXELS,
-            &[[lo, span, var, lb.mask()]],
+            slot as u64 * SLOT_TEXELS + SLOT_TEXELS - 2,
+            &[[r1[0], r1[1], r2[0], r2[1]], [r3[0], r3[1], 0, 0]],
         );
-        self.uploaded += (texels.len() * 4) as u64;
+        self.uploaded += bytes.len() as u64;
     }
 
     /// Writes one slot's (B+4)³ texels of `bpp` bytes.
@@ -447,41 +524,7 @@ impl BrickPool {
                 .collect();
             (bytemuck::cast_slice(&v).to_vec(), [0.0, 1.0])
         } else {
-            let (lo, hi) = crate::store::codec::value_range(values);
-            // Integer bricks spanning at most the codes go on a grid of
-            // 1/2^k (code = (value − lo)·2^k, the finest that fits),
-            // losslessly, as the store does; the texture unit's filtered
-            // values then keep the finest steps the codes allow.
-            let unit = crate::store::codec::unit_step_fits(
-                values,
-                lo,
-                hi,
-                crate::store::BrickEncoding::U8Range,
-                has_nan,
-            );
-            let top = if has_nan { 254.0 } else { 255.0 };
-            let span = if unit {
-                let mut grid = 1.0;
-                while (hi - lo) * grid * 2.0 <= top && grid < 128.0 {
-                    grid *= 2.0;
-                }
-                top / grid
-            } else {
-                hi - lo
-            };
-            let q = values
-                .iter()
-                .map(|&v| {
-                    if v.is_nan() {
-                        255
-                    } else if span > 0.0 {
-                        ((v - lo) / span * top).round().clamp(0.0, top) as u8
-                    } else {
-                        0
-                    }
-                })
-                .collect();
-            (q, [lo, span * 255.0 / top])
+            quantise(values, has_nan)
         };
         let bpp = if self.float { 4 } else { 1 };
         self.write_slot(gpu, slot, &bytes, bpp);
@@ -509,4 +552,45 @@ impl BrickPool {
         self.slots.write(gpu, slot as u64 * SLOT_TEXELS, &[entry]);
         self.uploaded += bytes.len() as u64;
     }
+}
+
+/// A brick's values as 8-bit codes against its own range (G10 §5), and the
+/// range the kernel decodes them with (value = range.0 + range.1 · code /
+/// 255). No-data voxels (NaN) take the top code, the values the 255 below.
+fn quantise(values: &[f32], has_nan: bool) -> (Vec<u8>, [f32; 2]) {
+    let (lo, hi) = crate::store::codec::value_range(values);
+    // Integer bricks spanning at most the codes go on a grid of
+    // 1/2^k (code = (value − lo)·2^k, the finest that fits),
+    // losslessly, as the store does; the texture unit's filtered
+    // values then keep the finest steps the codes allow.
+    let unit = crate::store::codec::unit_step_fits(
+        values,
+        lo,
+        hi,
+        crate::store::BrickEncoding::U8Range,
+        has_nan,
+    );
+    let top = if has_nan { 254.0 } else { 255.0 };
+    let span = if unit {
+        let mut grid = 1.0;
+        while (hi - lo) * grid * 2.0 <= top && grid < 128.0 {
+            grid *= 2.0;
+        }
+        top / grid
+    } else {
+        hi - lo
+    };
+    let q = values
+        .iter()
+        .map(|&v| {
+            if v.is_nan() {
+                255
+            } else if span > 0.0 {
+                ((v - lo) / span * top).round().clamp(0.0, top) as u8
+            } else {
+                0
+            }
+        })
+        .collect();
+    (q, [lo, span * 255.0 / top])
 }

@@ -113,6 +113,9 @@ pub struct KernelKey {
     /// Registered layers combined with the volume (DVR only; at most
     /// [`parallax_common::config::MAX_LAYERS`]): shared/layers.wgsl.
     pub layers: u32,
+    /// Every layer's table allows pre-integrating from the segments' ends
+    /// (`TfTable::layers_end_path`): five reads a sample and layer.
+    pub layer_end: bool,
 }
 
 impl KernelKey {
@@ -136,11 +139,14 @@ impl KernelKey {
         }
         let mut out = Self::with_steppers(&chains);
         for layers in 1..=parallax_common::config::MAX_LAYERS as u32 {
-            out.extend(chains.iter().map(|e| KernelKey {
-                enhancers: e.clone(),
-                layers,
-                ..Default::default()
-            }));
+            for layer_end in [false, true] {
+                out.extend(chains.iter().map(|e| KernelKey {
+                    enhancers: e.clone(),
+                    layers,
+                    layer_end,
+                    ..Default::default()
+                }));
+            }
         }
         out
     }
@@ -160,14 +166,18 @@ impl KernelKey {
             chains.push(vec![k; MAX_ENHANCERS]);
         }
         let mut out = Self::with_steppers(&chains);
-        // Registered layers, alone and under a clip plane and a probe.
+        // Registered layers, from their tables' ends or not, alone and
+        // under a clip plane and a probe.
         for layers in 1..=parallax_common::config::MAX_LAYERS as u32 {
-            for enhancers in [vec![], vec![EnhancerKind::ClipPlane, EnhancerKind::Probe]] {
-                out.push(KernelKey {
-                    layers,
-                    enhancers,
-                    ..Default::default()
-                });
+            for layer_end in [false, true] {
+                for enhancers in [vec![], vec![EnhancerKind::ClipPlane, EnhancerKind::Probe]] {
+                    out.push(KernelKey {
+                        layers,
+                        layer_end,
+                        enhancers,
+                        ..Default::default()
+                    });
+                }
             }
         }
         // The pass-through compiles to nothing and the gradient diagnostic
@@ -284,6 +294,7 @@ impl KernelKey {
         s.push_str("#import iso\n");
         let _ = writeln!(s, "const ISO: bool = {};", self.iso);
         let _ = writeln!(s, "const LAYERS: u32 = {}u;", self.layers);
+        let _ = writeln!(s, "const LAYER_END: bool = {};", self.layer_end);
         let _ = writeln!(s, "const HAS_BREAKS: bool = {};", any(|e| e.needs.breaks));
         let _ = writeln!(
             s,
@@ -459,7 +470,7 @@ mod tests {
         assert_eq!(
             keys.len(),
             (2 * 2 + 1) * (1 + 2 * kinds)
-                + 2 * parallax_common::config::MAX_LAYERS
+                + 4 * parallax_common::config::MAX_LAYERS
                 + kinds * kinds
                 + (kinds - 2) * (kinds - 2)
         );

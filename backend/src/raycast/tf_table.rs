@@ -50,6 +50,8 @@ pub struct TfTable {
     /// one's `LayerParams` table and entry fields (its opacity and view
     /// opacity are the frame's).
     pub(super) layers: Vec<super::params::LayerParams>,
+    /// Every layer's table allows the end path (as `end_allowed`).
+    layers_end: bool,
 }
 
 /// An n × n rgba32float texture for the 2D pre-integration table.
@@ -91,6 +93,22 @@ fn over_smallest_bin(bins: &[f64], x: f64) -> f64 {
     } else {
         1.0
     }
+}
+
+/// Whether every DVR channel's bin integrals lie within [`END_RANGE`] of
+/// each other (f32 partial bins keep their precision).
+fn dvr_within_end_range(table: &PreintTable) -> bool {
+    [
+        Channel::Tau,
+        Channel::EmissionR,
+        Channel::EmissionG,
+        Channel::EmissionB,
+    ]
+    .iter()
+    .all(|&ch| {
+        let bins = table.level(ch, 0);
+        over_smallest_bin(bins, bins.iter().cloned().fold(0.0, f64::max)) <= END_RANGE
+    })
 }
 
 impl TfTable {
@@ -140,6 +158,7 @@ impl TfTable {
             ],
         );
         let mut layer_params = Vec::with_capacity(layers.len());
+        let mut layers_end = true;
         for t in layers {
             let (planar, layout) = t.gpu_layout();
             let base = data.len() as u32;
@@ -155,6 +174,7 @@ impl TfTable {
                     Some(Channel::EmissionB),
                 ],
             );
+            layers_end &= prefix != 0 && dvr_within_end_range(t);
             layer_params.push(super::params::LayerParams {
                 table: [
                     layout.vmin as f32,
@@ -169,18 +189,7 @@ impl TfTable {
         let texels: Vec<[u32; 4]> = data.iter().map(|v| v.map(f32::to_bits)).collect();
         let buffer = texels::TexelTable::new(gpu, "pre-integration table", texels.len() as u64);
         buffer.write(gpu, 0, &texels);
-        let end_allowed = prefix_offset != 0
-            && [
-                Channel::Tau,
-                Channel::EmissionR,
-                Channel::EmissionG,
-                Channel::EmissionB,
-            ]
-            .iter()
-            .all(|&ch| {
-                let bins = table.level(ch, 0);
-                over_smallest_bin(bins, bins.iter().cloned().fold(0.0, f64::max)) <= END_RANGE
-            });
+        let end_allowed = prefix_offset != 0 && dvr_within_end_range(table);
         let closed = ClosedForm::new(tf, table.vmin(), table.vmax());
         let uniform: GpuPieces = closed
             .as_ref()
@@ -206,6 +215,7 @@ impl TfTable {
             max_importance: max_importance as f32,
             id: next_resource_id(),
             layers: layer_params,
+            layers_end,
         })
     }
 
@@ -249,6 +259,12 @@ impl TfTable {
             }
         }
         start
+    }
+
+    /// Whether every registered layer's table allows pre-integrating from
+    /// the segments' ends (the kernel's LAYER_END).
+    pub fn layers_end_path(&self) -> bool {
+        self.layers_end && !self.layers.is_empty()
     }
 
     /// Whether whole bins are summed by the running integral.
