@@ -1169,6 +1169,15 @@ fn a_real_browser_drags_the_volume_round() {
                 assert!(start.elapsed() < WAIT, "the page's layer slider never reached the server");
                 observer.next_text().await;
             }
+            // The editor switched to the layer shows its function (two
+            // points), and an edit there reaches the layer's.
+            assert_eq!(cdp.eval("(() => { const s = document.getElementById('tftarget'); s.value = '0'; s.dispatchEvent(new Event('change')); return tf.length; })()").await, json!(2));
+            cdp.eval("(() => { tf[1].extinction = 0.05; tfChanged(); return ''; })()").await;
+            let start = Instant::now();
+            while observer.state["layer_tfs"][0]["point"][1]["extinction"] != json!(0.05) {
+                assert!(start.elapsed() < WAIT, "the page's layer function edit never reached the server");
+                observer.next_text().await;
+            }
             cdp.session = None;
             let _ = cdp.call("Browser.close", json!({})).await;
             observer.send(json!({"type": "quit"})).await;
@@ -1888,9 +1897,10 @@ fn a_hostile_client_mix_neither_stalls_the_session_nor_grows_its_memory() {
 }
 
 /// A scene's registered layer in the live page's protocol: the hello names
-/// it, the state carries its visibility and opacity, a `layer` message
-/// changes the image (hiding it gives the volume alone, showing it again
-/// the image it had), and a bad index or opacity is refused by name.
+/// it, the state carries its visibility, opacity and transfer function, a
+/// `layer` message changes the image (hiding it gives the volume alone,
+/// showing it again the image it had), a `layer-tf` message recolours it,
+/// and a bad index, opacity or function is refused by name.
 #[test]
 fn a_layers_visibility_and_opacity_change_live() {
     std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
@@ -1954,9 +1964,30 @@ fn a_layers_visibility_and_opacity_change_live() {
         assert!(red(&shown) > red(&faint) && red(&faint) > red(&hidden));
         assert!(diff(&shown, &hidden) > 2.0, "hiding the layer changed the image");
         assert!(diff(&shown, &again) < 0.5, "showing it again restores it");
+        // The layer's transfer function, edited: green instead of red.
+        assert_eq!(a.state["layer_tfs"][0]["point"][1]["value"], json!(255.0));
+        let v = a
+            .change(json!({"type": "layer-tf", "index": 0, "point": [
+                {"value": 100, "color": [0.1, 1, 0.1], "extinction": 0},
+                {"value": 255, "color": [0.1, 1, 0.1], "extinction": 0.3}]}))
+            .await;
+        let green = a.settled(v).await.pixels();
+        let greenness = |img: &[u8]| img.chunks(3).map(|p| p[1] as f64 - p[0] as f64).sum::<f64>();
+        println!(
+            "layer live: greenness {:.0} red layer, {:.0} green layer",
+            greenness(&again),
+            greenness(&green)
+        );
+        assert!(greenness(&green) > greenness(&again) + 1000.0);
         for (bad, says) in [
             (json!({"type": "layer", "index": 1, "opacity": 0.5}), "index"),
             (json!({"type": "layer", "index": 0, "opacity": 2.0}), "opacity"),
+            (json!({"type": "layer-tf", "index": 2, "point": [
+                {"value": 0, "color": [0, 0, 0], "extinction": 0},
+                {"value": 1, "color": [0, 0, 0], "extinction": 1}]}), "index"),
+            (json!({"type": "layer-tf", "index": 0, "point": [
+                {"value": 0, "color": [0, 0, 0], "extinction": -1},
+                {"value": 1, "color": [0, 0, 0], "extinction": 1}]}), "extinction"),
         ] {
             a.send(bad.clone()).await;
             let e = a.error().await;

@@ -206,6 +206,12 @@ fn handle(
             let s = setup.as_mut().context("transfer function before setup")?;
             s.renderer.set_transfer_function(version, &tf)?;
         }
+        ToBackend::LayerFunctions { version: _, tfs } => {
+            let s = setup
+                .as_mut()
+                .context("layer transfer functions before setup")?;
+            s.renderer.set_layer_functions(&tfs)?;
+        }
         ToBackend::Tools { version, tools } => {
             let s = setup.as_mut().context("tools before setup")?;
             s.renderer.set_tools(version, &tools)?;

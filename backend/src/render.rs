@@ -125,7 +125,11 @@ fn caches(
 /// the volume `db`: each on its grid (the same dimensions, bricks and
 /// spacing), with its transfer function's tables over its data range.
 /// Errors name the layer's field and file.
-fn active_layers(db: &OctreeDb, specs: &[Layer]) -> Result<Vec<ActiveLayer>> {
+fn active_layers(
+    db: &OctreeDb,
+    specs: &[Layer],
+    tfs: &[Option<TransferFunction>],
+) -> Result<Vec<ActiveLayer>> {
     let mut out = Vec::new();
     for (i, spec) in specs.iter().enumerate() {
         if !spec.visible || spec.opacity <= 0.0 {
@@ -149,8 +153,11 @@ fn active_layers(db: &OctreeDb, specs: &[Layer]) -> Result<Vec<ActiveLayer>> {
                 a.brick
             );
         }
-        let tf = TransferFunction::load(&spec.transfer_function)
-            .with_context(|| field("transfer_function", &spec.transfer_function))?;
+        let tf = match tfs.get(i) {
+            Some(Some(tf)) => tf.clone(),
+            _ => TransferFunction::load(&spec.transfer_function)
+                .with_context(|| field("transfer_function", &spec.transfer_function))?,
+        };
         let s = &ldb.summary;
         let (lo, hi) = (s.value_min as f64, s.value_max as f64);
         let bins = PreintTable::suggested_bins(lo, hi, !ldb.header.info.voxel_type.is_float());
@@ -184,6 +191,9 @@ pub struct Renderer {
     /// The scene's layers as last set (drawn or not), and the settings the
     /// caches were made with (their budgets, when the drawn layers change).
     specs: Vec<Layer>,
+    /// The layers' transfer functions where the live page replaced the
+    /// scene's files (`[[layer]]` order).
+    layer_tfs: Vec<Option<TransferFunction>>,
     budgets: RenderConfig,
     raycaster: Raycaster,
     pool: BrickPool,
@@ -277,7 +287,7 @@ impl Renderer {
     ) -> Result<Self> {
         let db = Arc::new(OctreeDb::open(database)?);
         let specs = layers.to_vec();
-        let layers = active_layers(&db, layers)?;
+        let layers = active_layers(&db, layers, &[])?;
         if !layers.is_empty() {
             cfg.check_layered("render")?;
         }
@@ -294,6 +304,7 @@ impl Renderer {
         Ok(Renderer {
             layers,
             specs,
+            layer_tfs: Vec::new(),
             budgets: cfg.clone(),
             gpu,
             raycaster,
@@ -680,12 +691,36 @@ impl Renderer {
             self.specs = specs;
             return Ok(());
         }
-        let layers = active_layers(&self.db, &specs)?;
+        self.specs = specs;
+        self.rebuild_layers()
+    }
+
+    /// Replaces the layers' transfer functions (`[[layer]]` order; `None`:
+    /// the scene's file), as the live page edits them. A change remakes the
+    /// caches (a layer's bricks are read where its function sees data).
+    pub fn set_layer_functions(&mut self, tfs: &[Option<TransferFunction>]) -> Result<()> {
+        if tfs.len() != self.specs.len() {
+            bail!(
+                "layers: {} transfer functions for the scene's {} layers",
+                tfs.len(),
+                self.specs.len()
+            );
+        }
+        if tfs == self.layer_tfs.as_slice() {
+            return Ok(());
+        }
+        self.layer_tfs = tfs.to_vec();
+        self.rebuild_layers()
+    }
+
+    /// Opens the layers drawn under the current controls and functions and
+    /// remakes the caches, the pool and the tables for them.
+    fn rebuild_layers(&mut self) -> Result<()> {
+        let layers = active_layers(&self.db, &self.specs, &self.layer_tfs)?;
         let (raycaster, pool, mut loader) = caches(&self.gpu, &self.db, &layers, &self.budgets)?;
         loader.set_lightfield(self.loader.lightfield());
         loader.set_frustum_culling(self.loader.config().frustum_culling);
         self.layers = layers;
-        self.specs = specs;
         self.raycaster = raycaster;
         self.pool = pool;
         self.loader = loader;

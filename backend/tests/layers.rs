@@ -386,3 +386,86 @@ fn a_layers_share_at_two_eyes_follows_the_smoothstep() {
         "the eyes see the layer differently"
     );
 }
+
+/// Numerical stability with layers: a constant volume, layers of huge
+/// (1e6) and tiny (1e-9) extinction, a delta-like function, NaN voxels (no
+/// data) in a layer, and a view opacity with equal angles — every pixel
+/// finite, in [0, 1], and a tiny layer changes the volume's image by no
+/// more than its extinction can.
+#[test]
+fn extreme_layers_stay_finite() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 32;
+    let constant = Volume::from_fn([n; 3], [1.0; 3], VoxelType::F32, |_, _, _| 100.0);
+    let holes = Volume::from_fn([n; 3], [1.0; 3], VoxelType::F32, |i, j, k| {
+        if (i + j + k) % 7 == 0 {
+            f32::NAN
+        } else {
+            (i * 8) as f32
+        }
+    });
+    let a = dir.path().join("constant.pxo");
+    let b = dir.path().join("holes.pxo");
+    support::import_volume(&constant, &a, 16, BrickEncoding::F32);
+    support::import_volume(&holes, &b, 16, BrickEncoding::F32);
+    let flat = |tau: f64| {
+        TransferFunction::from_points(vec![
+            ControlPoint::new(0.0, [0.2, 0.6, 1.0], tau),
+            ControlPoint::new(300.0, [1.0, 0.6, 0.2], tau),
+        ])
+        .unwrap()
+    };
+    let delta = TransferFunction::from_points(vec![
+        ControlPoint::new(99.999, [1.0, 1.0, 1.0], 0.0),
+        ControlPoint::new(100.0, [1.0, 1.0, 1.0], 1e4),
+        ControlPoint::new(100.001, [1.0, 1.0, 1.0], 0.0),
+    ])
+    .unwrap();
+    let huge = write_tf(&dir.path().join("huge.toml"), &flat(1e6));
+    let tiny = write_tf(&dir.path().join("tiny.toml"), &flat(1e-9));
+    let delta_file = write_tf(&dir.path().join("delta.toml"), &delta);
+    let placement = Placement {
+        center: [0.0; 3],
+        rotation_deg: [20.0, 35.0, 0.0],
+        size: 0.2,
+    };
+    let view = View::window([48, 48], [0.3, 0.3], [0.0, 0.0, 0.8]);
+    let cfg = RenderConfig::default();
+    let base = flat(0.01);
+    let (alone, _) = render(&a, &[], &base, &placement, &[view], &cfg);
+    let cases = [
+        ("huge", vec![layer(&a, &huge)]),
+        ("tiny", vec![layer(&a, &tiny)]),
+        ("delta", vec![layer(&a, &delta_file)]),
+        ("holes", vec![layer(&b, &huge), layer(&b, &tiny)]),
+        (
+            "equal angles",
+            vec![Layer {
+                view_opacity: Some(ViewOpacity {
+                    axis: [0.0, 0.0, 1.0],
+                    angles_deg: [90.0, 90.0],
+                }),
+                ..layer(&a, &huge)
+            }],
+        ),
+    ];
+    for (name, layers) in cases {
+        let (f, _) = render(&a, &layers, &base, &placement, &[view], &cfg);
+        let img = &f.images[0];
+        support::assert_valid(name, img);
+        let (rmse, max) = support::error(
+            img,
+            &alone.images[0]
+                .iter()
+                .map(|p| p.map(f64::from))
+                .collect::<Vec<_>>(),
+        );
+        println!("{name}: finite, in [0, 1]; against the volume alone RMSE {rmse:.2e}, max {max:.2e}, mean opacity {:.3}", support::mean_alpha(img));
+        if name == "tiny" {
+            assert!(max < 1e-6, "a 1e-9 layer: {max:.2e}");
+        }
+        if name == "huge" || name == "equal angles" {
+            assert!(support::mean_alpha(img) > support::mean_alpha(&alone.images[0]));
+        }
+    }
+}

@@ -99,6 +99,12 @@ pub enum ToBackend {
         /// frame on them when told to ([`ToBackend::Present`]).
         present: bool,
     },
+    /// The registered layers' transfer functions, in `[[layer]]` order,
+    /// as the live page edited them (`None`: the scene's file).
+    LayerFunctions {
+        version: u64,
+        tfs: Vec<Option<TransferFunction>>,
+    },
     TransferFunction {
         version: u64,
         tf: TransferFunction,

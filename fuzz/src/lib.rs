@@ -97,7 +97,8 @@ const SCENE: &str =
     "volume = \"v.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n\
 [placement]\ncenter = [0, 0, 0]\nsize = 0.2\nrotation_deg = [10, 20, 0]\n\
 [render]\neta = 0.5\nshading = \"phong\"\n\
-[[tool]]\nkind = \"band-picker\"\nband = [10, 20, 30, 40]\n";
+[[tool]]\nkind = \"band-picker\"\nband = [10, 20, 30, 40]\n\
+[[layer]]\nvolume = \"v.pxo\"\ntransfer_function = \"tf.toml\"\nopacity = 0.5\n";
 
 /// An OME-Zarr image (NGFF 0.5, Zarr v3: a group, one 4×4×4 u8 array
 /// `s0` of one gzip chunk). The first byte chooses the file the rest
@@ -263,8 +264,9 @@ fn live(input: &[u8]) {
         let scene = Scene::load(&dir.join("scene.toml")).unwrap();
         let display = Display::load(&dir.join("display.toml")).unwrap();
         let tf = parallax_common::tf::TransferFunction::load(dir.join("tf.toml")).unwrap();
+        let layer_tfs = vec![tf.clone(); scene.layers.len()];
         (
-            parallax_frontend::live::LiveState::from_scene(&scene, &display, tf),
+            parallax_frontend::live::LiveState::from_scene(&scene, &display, tf, layer_tfs),
             display,
         )
     });

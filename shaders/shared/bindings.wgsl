@@ -75,11 +75,13 @@ var<private> frame: GpuFrame;
 // `tile_at`.
 @group(0) @binding(1) var frame_table: texture_2d<u32>;
 @group(0) @binding(3) var pool: texture_3d<f32>;
-// Per pool slot, in 5 texels (backend/src/raycast/pool.rs): its value
-// range (min, max − min, variance on [0, 1] among bricks, 0; f32 bits),
-// then its empty macrocells (L12 §4.1): 16 words of bits, one per cell of
-// the brick (C³ ≤ 512 cells of M³ voxels), set where the transfer function
-// is τ ≡ 0 over every value interpolation there can give.
+// Per pool slot, in SLOT_TEXELS (7) texels (backend/src/raycast/pool.rs):
+// its value range (min, max − min, variance on [0, 1] among bricks, and in
+// a layered pool the mask of the media with data; f32 bits), then its
+// empty macrocells (L12 §4.1): 16 words of bits, one per cell of the brick
+// (C³ ≤ 512 cells of M³ voxels), set where the transfer function is τ ≡ 0
+// over every value interpolation there can give (in a layered pool, every
+// medium's), then the registered layers' ranges (`layer_ranges`).
 @group(0) @binding(4) var slot_table: texture_2d<u32>;
 // (τ, k̃r, k̃g, k̃b) interleaved: node values, then the pyramid levels.
 @group(0) @binding(5) var tf_table: texture_2d<u32>;

@@ -262,7 +262,16 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
     let mut hello = state::hello(&opts.scene, &scene, &display, &tf, &opts.record_dir);
     hello["record_limits"] = opts.record_limits.json();
     let hello = hello.to_string();
-    let state = LiveState::from_scene(&scene, &display, tf);
+    let layer_tfs = scene
+        .layers
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            TransferFunction::load(&l.transfer_function)
+                .with_context(|| format!("{}: layer[{i}].transfer_function", opts.scene.display()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let state = LiveState::from_scene(&scene, &display, tf, layer_tfs);
     let token = match &opts.token {
         Some(t) if t.len() < MIN_TOKEN || !t.chars().all(|c| c.is_ascii_alphanumeric()) => {
             anyhow::bail!(
@@ -373,6 +382,9 @@ fn frame_loop(
     let mut tf_version = 1u64;
     let mut sent_tools = scene.tools.clone();
     let mut tools_version = 1u64;
+    // What the back ends drew the layers with at set-up: the scene's files.
+    let mut sent_layer_tfs = shared.live.lock().unwrap().state.layer_tfs.clone();
+    let mut layer_tfs_version = 0u64;
     let mut recorder = match &opts.record {
         Some(dir) => Some(record::Recorder::start(
             dir.clone(),
@@ -434,6 +446,16 @@ fn frame_loop(
                 })?;
             }
             sent_tf = Some(state.tf.clone());
+        }
+        if state.layer_tfs != sent_layer_tfs {
+            // The back ends read the scene's files at set-up; an edit
+            // replaces them all.
+            layer_tfs_version += 1;
+            transport.broadcast(&ToBackend::LayerFunctions {
+                version: layer_tfs_version,
+                tfs: state.layer_tfs.iter().cloned().map(Some).collect(),
+            })?;
+            sent_layer_tfs = state.layer_tfs.clone();
         }
         if state.tools != sent_tools {
             tools_version += 1;

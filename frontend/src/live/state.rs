@@ -40,6 +40,9 @@ pub struct LiveState {
     /// opacity (`[[layer]]` order).
     #[serde(default)]
     pub layers: Vec<LayerControl>,
+    /// Their transfer functions (the scene's files, then as edited).
+    #[serde(default)]
+    pub layer_tfs: Vec<TransferFunction>,
 }
 
 /// A transfer function point as the page sends it.
@@ -99,6 +102,11 @@ pub enum ClientMsg {
         index: usize,
         visible: Option<bool>,
         opacity: Option<f64>,
+    },
+    /// Replaces registered layer `index`'s transfer function.
+    LayerTf {
+        index: usize,
+        point: Vec<PointMsg>,
     },
     /// Moves tool `from` to place `to` of the chain (enhancers act in
     /// chain order).
@@ -216,7 +224,14 @@ pub fn hello(
 }
 
 impl LiveState {
-    pub fn from_scene(scene: &Scene, display: &Display, tf: TransferFunction) -> Self {
+    /// The state a session starts from: the scene, its display, its
+    /// transfer function and its layers' (`layer_tfs`, `[[layer]]` order).
+    pub fn from_scene(
+        scene: &Scene,
+        display: &Display,
+        tf: TransferFunction,
+        layer_tfs: Vec<TransferFunction>,
+    ) -> Self {
         LiveState {
             placement: scene.placement,
             eta: scene.render.eta,
@@ -235,6 +250,7 @@ impl LiveState {
             overlay: scene.render.overlay.show,
             cursor: scene.render.overlay.cursor,
             layers: scene.layers.iter().map(LayerControl::from).collect(),
+            layer_tfs,
         }
     }
 
@@ -302,7 +318,15 @@ impl LiveState {
                     self.gamma = within("set.gamma", v, 0.0, 1.0)?;
                 }
             }
-            ClientMsg::Tf { point } => self.set_tf(point)?,
+            ClientMsg::Tf { point } => self.tf = transfer_function("tf", point)?,
+            ClientMsg::LayerTf { index, point } => {
+                let n = self.layer_tfs.len();
+                ensure!(
+                    index < n,
+                    "layer-tf.index {index}: the scene has {n} layers"
+                );
+                self.layer_tfs[index] = transfer_function("layer-tf", point)?;
+            }
             ClientMsg::Tool(edit) => self.edit_tool(&edit)?,
             ClientMsg::AddTool { tool } => {
                 ensure!(
@@ -357,31 +381,9 @@ impl LiveState {
         }
         Ok(())
     }
+}
 
-    /// A new transfer function from the page's control points.
-    fn set_tf(&mut self, point: Vec<PointMsg>) -> Result<()> {
-        ensure!(
-            (2..=MAX_TF_POINTS).contains(&point.len()),
-            "tf.point: {} points (2 to {MAX_TF_POINTS})",
-            point.len()
-        );
-        let pts = point
-            .into_iter()
-            .map(|p| {
-                let mut c = parallax_common::tf::ControlPoint::new(p.value, p.color, p.extinction);
-                if let Some(i) = p.importance {
-                    c.importance = i;
-                }
-                if let Some(r) = p.refraction {
-                    c.refraction = r;
-                }
-                c
-            })
-            .collect();
-        self.tf = TransferFunction::from_points(pts).context("tf")?;
-        Ok(())
-    }
-
+impl LiveState {
     /// Fields of a tool changed: each given field replaces the tool's (a
     /// field its kind does not have is refused by name), then the tool is
     /// checked whole.
@@ -474,6 +476,21 @@ impl LiveState {
             "state.tf: {n} points (2 to {MAX_TF_POINTS})"
         );
         next.tf = TransferFunction::from_points(s.tf.points().to_vec()).context("state.tf")?;
+        ensure!(
+            s.layer_tfs.len() == next.layer_tfs.len(),
+            "state.layer_tfs: {} functions, the scene has {} layers",
+            s.layer_tfs.len(),
+            next.layer_tfs.len()
+        );
+        for (i, t) in s.layer_tfs.iter().enumerate() {
+            let n = t.points().len();
+            ensure!(
+                (2..=MAX_TF_POINTS).contains(&n),
+                "state.layer_tfs {i}: {n} points (2 to {MAX_TF_POINTS})"
+            );
+            next.layer_tfs[i] = TransferFunction::from_points(t.points().to_vec())
+                .with_context(|| format!("state.layer_tfs {i}"))?;
+        }
         ensure!(
             s.tools.len() <= MAX_ENHANCERS,
             "state.tools: {} tools, at most {MAX_ENHANCERS} can be chained",
@@ -583,6 +600,30 @@ impl LiveState {
 fn euler_deg(r: DMat3) -> [f64; 3] {
     let (z, y, x) = DQuat::from_mat3(&r).normalize().to_euler(EulerRot::ZYX);
     [x.to_degrees(), y.to_degrees(), z.to_degrees()]
+}
+
+/// A transfer function from a page's points (`what`: the message, for the
+/// errors).
+fn transfer_function(what: &str, point: Vec<PointMsg>) -> Result<TransferFunction> {
+    ensure!(
+        (2..=MAX_TF_POINTS).contains(&point.len()),
+        "{what}.point: {} points (2 to {MAX_TF_POINTS})",
+        point.len()
+    );
+    let pts = point
+        .into_iter()
+        .map(|p| {
+            let mut c = parallax_common::tf::ControlPoint::new(p.value, p.color, p.extinction);
+            if let Some(i) = p.importance {
+                c.importance = i;
+            }
+            if let Some(r) = p.refraction {
+                c.refraction = r;
+            }
+            c
+        })
+        .collect();
+    TransferFunction::from_points(pts).context(what.to_string())
 }
 
 #[cfg(test)]
