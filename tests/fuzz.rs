@@ -554,7 +554,11 @@ fn wire_seeds() {
         ("to-frame", encode(&ToBackend::Frame(frame)).unwrap()),
         (
             "to-tf",
-            encode(&ToBackend::TransferFunction { version: 2, tf }).unwrap(),
+            encode(&ToBackend::TransferFunction {
+                version: 2,
+                tf: tf.clone(),
+            })
+            .unwrap(),
         ),
         (
             "to-tools",
@@ -565,6 +569,14 @@ fn wire_seeds() {
             encode(&ToBackend::Present { frame: 7 }).unwrap(),
         ),
         ("to-quit", encode(&ToBackend::Quit).unwrap()),
+        (
+            "to-layer-functions",
+            encode(&ToBackend::LayerFunctions {
+                version: 2,
+                tfs: vec![Some(tf), None],
+            })
+            .unwrap(),
+        ),
         ("stats", encode(&stats).unwrap()),
     ];
     let dir = root.join("fuzz/corpus/wire");

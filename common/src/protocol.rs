@@ -99,12 +99,6 @@ pub enum ToBackend {
         /// frame on them when told to ([`ToBackend::Present`]).
         present: bool,
     },
-    /// The registered layers' transfer functions, in `[[layer]]` order,
-    /// as the live page edited them (`None`: the scene's file).
-    LayerFunctions {
-        version: u64,
-        tfs: Vec<Option<TransferFunction>>,
-    },
     TransferFunction {
         version: u64,
         tf: TransferFunction,
@@ -123,6 +117,13 @@ pub enum ToBackend {
         frame: u64,
     },
     Quit,
+    /// The registered layers' transfer functions, in `[[layer]]` order,
+    /// as the live page edited them (`None`: the scene's file). Last, so
+    /// that the other messages keep their encoding.
+    LayerFunctions {
+        version: u64,
+        tfs: Vec<Option<TransferFunction>>,
+    },
 }
 
 /// The version of these messages: a rank that speaks another is named
