@@ -748,3 +748,142 @@ fn layers_are_listed_rendered_and_bad_ones_refused_naming_the_scene() {
         assert!(took.as_secs_f64() < 1.0, "{took:?}");
     }
 }
+
+/// Mean of one channel (0 red … 2 blue) over columns [x0, x1) of an 8-bit
+/// RGB or RGBA PNG.
+fn png_mean(path: &Path, channel: usize, x0: u32, x1: u32) -> f64 {
+    let mut r = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()))
+        .read_info()
+        .unwrap();
+    let mut buf = vec![0u8; r.output_buffer_size()];
+    let info = r.next_frame(&mut buf).unwrap();
+    let c = info.color_type.samples();
+    let (w, h) = (info.width as usize, info.height as usize);
+    let mut sum = 0.0;
+    for y in 0..h {
+        for x in x0 as usize..x1 as usize {
+            sum += buf[(y * w + x) * c + channel] as f64;
+        }
+    }
+    sum / (h * (x1 - x0) as usize) as f64
+}
+
+/// View-dependent layer opacity on a light field wall, in `parallax
+/// simulate`'s images (G10 §4): two eyes on either side of the viewing
+/// line see the red layer's share the smoothstep gives their direction to
+/// the volume — each eye's red over the volume alone, as a fraction of the
+/// layer at full opacity's, against the layer at that fixed opacity.
+#[test]
+fn a_layers_share_in_the_simulated_eyes_follows_the_smoothstep() {
+    let d = tempfile::tempdir().unwrap();
+    let vol = d.path().join("v.nrrd");
+    ok(&["synth", "shells", "--size", "48", "-o", s(&vol)]);
+    ok(&[
+        "import",
+        s(&vol),
+        "-o",
+        s(&d.path().join("v.pxo")),
+        "--brick",
+        "16",
+    ]);
+    ok(&[
+        "display-gen",
+        "--projectors",
+        "12",
+        "--resolution",
+        "64x36",
+        "--pixel-size",
+        "0.0333",
+        "-o",
+        s(&d.path().join("wall")),
+    ]);
+    write_all(
+        d.path(),
+        &[
+            (
+                "tf.toml",
+                "[[point]]\nvalue = 0\ncolor = [0.3, 0.6, 1]\nextinction = 0\n[[point]]\nvalue = 255\ncolor = [0.3, 0.6, 1]\nextinction = 0.05\n",
+            ),
+            (
+                "red.toml",
+                "[[point]]\nvalue = 0\ncolor = [1, 0, 0]\nextinction = 0\n[[point]]\nvalue = 255\ncolor = [1, 0, 0]\nextinction = 0.15\n",
+            ),
+        ],
+    );
+    let head = "volume = \"v.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"wall/display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.4\nrotation_deg = [15, 30, 0]\n[render]\neta = 1.0\n";
+    let (axis, angles) = ([-1.0f64, 0.0, 0.0], [70.0f64, 110.0]);
+    let eyes = [-0.3f64, 0.3];
+    // The smoothstep of each eye's direction to the volume's centre.
+    let factor = |ex: f64| {
+        let n = (ex * ex + 4.0).sqrt();
+        let cos = (-ex * axis[0] + -2.0 * axis[2]) / n;
+        let t = ((cos.acos().to_degrees() - angles[0]) / (angles[1] - angles[0])).clamp(0.0, 1.0);
+        t * t * (3.0 - 2.0 * t)
+    };
+    // Renders a scene and simulates both eyes: each eye's mean red.
+    let red = |name: &str, layer: &str| -> [f64; 2] {
+        let scene = write(
+            d.path().join(format!("{name}.toml")),
+            &format!("{head}{layer}"),
+        );
+        let out = d.path().join(name);
+        ok(&[
+            "render",
+            "--scene",
+            s(&scene),
+            "--frames",
+            "4",
+            "--sync",
+            "--out",
+            s(&out),
+        ]);
+        let png = d.path().join(format!("{name}-eyes.png"));
+        ok(&[
+            "simulate",
+            "--display",
+            s(&d.path().join("wall/display.toml")),
+            "--frames",
+            s(&out.join("frame_00003")),
+            "--eye=-0.3,0,2",
+            "--eye=0.3,0,2",
+            "--resolution",
+            "160x90",
+            "-o",
+            s(&png),
+        ]);
+        [png_mean(&png, 0, 0, 160), png_mean(&png, 0, 160, 320)]
+    };
+    let layer = |extra: &str| {
+        format!("[[layer]]\nvolume = \"v.pxo\"\ntransfer_function = \"red.toml\"\n{extra}")
+    };
+    let base = red("base", "");
+    let full = red("full", &layer(""));
+    let seen = red(
+        "seen",
+        &layer(&format!(
+            "view_opacity = {{ axis = {axis:?}, angles_deg = {angles:?} }}\n"
+        )),
+    );
+    let mut shares = Vec::new();
+    for (e, &ex) in eyes.iter().enumerate() {
+        let f = factor(ex);
+        let fixed = red(&format!("fixed{e}"), &layer(&format!("opacity = {f}\n")));
+        let share = |v: [f64; 2]| (v[e] - base[e]) / (full[e] - base[e]);
+        println!(
+            "simulated eye at x = {ex}: smoothstep {f:.3}; the layer's share {:.3}, at that fixed opacity {:.3} (mean red {:.1} without the layer, {:.1} at full)",
+            share(seen),
+            share(fixed),
+            base[e],
+            full[e]
+        );
+        assert!(full[e] - base[e] > 3.0, "the layer shows to eye {e}");
+        assert!(
+            (share(seen) - share(fixed)).abs() < 0.1,
+            "eye {e}: {:.3} against {:.3}",
+            share(seen),
+            share(fixed)
+        );
+        shares.push(share(seen));
+    }
+    assert!(shares[0] > shares[1] + 0.4, "{shares:?}");
+}
