@@ -368,7 +368,7 @@ impl Renderer {
         let layer_tables: Vec<&PreintTable> = self.layers.iter().map(|l| &l.preint).collect();
         self.tf = Some(ActiveTf {
             version,
-            table: TfTable::with_layers(&self.gpu, &table, tf, &layer_tables)?,
+            table: TfTable::with_layers(&self.gpu, &table, tf, &layer_tables),
             preint: table,
             empty,
             empty_refraction,

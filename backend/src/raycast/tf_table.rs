@@ -114,7 +114,7 @@ fn dvr_within_end_range(table: &PreintTable) -> bool {
 impl TfTable {
     /// The tables of `tf`, `table` its pre-integration table.
     pub fn new(gpu: &Gpu, table: &PreintTable, tf: &TransferFunction) -> Self {
-        Self::with_layers(gpu, table, tf, &[]).expect("a table without layers")
+        Self::with_layers(gpu, table, tf, &[])
     }
 
     /// The tables of `tf` and, after them, the DVR tables of registered
@@ -125,7 +125,7 @@ impl TfTable {
         table: &PreintTable,
         tf: &TransferFunction,
         layers: &[&PreintTable],
-    ) -> anyhow::Result<Self> {
+    ) -> Self {
         let max_importance = tf.max_importance();
         let (planar, layout) = table.gpu_layout();
         // Two interleaved parts with the same layout: (τ, k̃r, k̃g, k̃b), what
@@ -201,7 +201,7 @@ impl TfTable {
                 contents: bytemuck::cast_slice(&uniform),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-        Ok(TfTable {
+        TfTable {
             buffer,
             layout,
             prefix_offset,
@@ -216,7 +216,7 @@ impl TfTable {
             id: next_resource_id(),
             layers: layer_params,
             layers_end,
-        })
+        }
     }
 
     /// Appends one part (four channels interleaved, nodes and pyramid) and,
