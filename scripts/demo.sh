@@ -43,6 +43,11 @@ cp "$out/iso/frame_00007/window.png" "$out/colin27-iso.png"
 # function, its media added to the brain tissue's.
 $px render --scene configs/scenes/colin27-layers.toml --frames 8 --sync --out "$out/layers"
 cp "$out/layers/frame_00007/window.png" "$out/colin27-layers.png"
+# A label layer: tissue labels made of the scan by thresholds, each in its
+# colour from an ITK-SNAP label description file, read at the nearest voxel.
+$px import "$src" -o "$out/colin27-labels.pxo" --labels-from-thresholds 60,95,120
+$px render --scene configs/scenes/colin27-labels.toml --frames 8 --sync --out "$out/labels"
+cp "$out/labels/frame_00007/window.png" "$out/colin27-labels.png"
 
 # OME-Zarr: the CT phantom written as an OME-Zarr image (NGFF 0.5, Zarr v3,
 # 64³ zstd chunks), imported from it, rendered with the CT-Bone preset.
@@ -94,6 +99,7 @@ echo "Look at: $out/colin27-skin.png, $out/colin27-brain.png, $out/colin27-clip.
 echo "         $out/colin27-mimda.png, $out/colin27-iso.png, $out/wall16-eyes.png, $out/wall16-clip-eyes.png,"
 echo "         $out/colin27-probe.png, $out/colin27-band.png, $out/colin27-shading.png, $out/wall16-probe-eyes.png, $out/wall16-band-eyes.png,"
 echo "         $out/colin27-overlay.png, $out/wall16-overlay-eyes.png, $out/ct-zarr.png (from an OME-Zarr image),"
-echo "         $out/colin27-layers.png, $out/wall16-layers-eyes.png (a registered layer, view-dependent on the wall)"
+echo "         $out/colin27-layers.png, $out/wall16-layers-eyes.png (a registered layer, view-dependent on the wall),"
+echo "         $out/colin27-labels.png (a label layer: tissue labels in their colours)"
 echo "         and $out/looking-glass-panel.png (the panel of a Looking Glass, interleaved for its lenses)"
 echo "(every frame: $out/skin/frame_*/window.png; figures per frame: $out/skin/stats.jsonl)"

@@ -585,7 +585,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             if (LAYERS > 0u) {
                 let v = sample_layered(leaf, o + d * tn);
                 s_prev = leaf.range.x + leaf.range.y * v.x;
-                lay_prev = lay_lo + lay_span * v.yzw;
+                lay_prev = layer_values(leaf, o + d * tn, v, lay_lo, lay_span);
                 le_prev = layer_ends(lay_prev);
                 mask_prev = mask;
             } else {
@@ -631,7 +631,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 if (LAYERS > 0u) {
                     let v = sample_layered(leaf, o + d * tn);
                     s = leaf.range.x + leaf.range.y * v.x;
-                    lay = lay_lo + lay_span * v.yzw;
+                    lay = layer_values(leaf, o + d * tn, v, lay_lo, lay_span);
                 } else {
                     s = sample_levels(lv, blend, o + d * tn);
                 }

@@ -725,11 +725,60 @@ fn layers_are_listed_rendered_and_bad_ones_refused_naming_the_scene() {
         s(&out),
     ]);
     assert!(out.join("frame_00002/w.png").exists(), "{text}");
+    // A label layer: labels made of the volume by thresholds, drawn through
+    // an ITK-SNAP label description file.
+    let imported = ok(&[
+        "import",
+        s(&d.path().join("ml.nrrd")),
+        "-o",
+        s(&d.path().join("labels.pxo")),
+        "--brick",
+        "16",
+        "--labels-from-thresholds",
+        "100,200",
+    ]);
+    assert!(imported.contains("labels: 0–2 (3 labels)"), "{imported}");
+    write_all(
+        d.path(),
+        &[
+            (
+                "labels.txt",
+                "# ITK-SnAP Label Description File\n0 0 0 0 0 0 0 \"Clear Label\"\n1 255 0 0 0.2 1 1 \"low\"\n2 0 0 255 0.5 1 1 \"high\"\n",
+            ),
+            ("no2.txt", "0 0 0 0 0 0 0 \"Clear Label\"\n1 255 0 0 0.2 1 1 \"low\"\n"),
+        ],
+    );
+    let labels =
+        |table: &str| format!("[[layer]]\nvolume = \"labels.pxo\"\nlabels = \"{table}\"\n");
+    let scene = write(
+        d.path().join("labels.toml"),
+        &format!("{head}{}", labels("labels.txt")),
+    );
+    let info = ok(&["info", s(&scene)]);
+    assert!(
+        info.contains("layer[0]:      labels") && info.contains("labels:        0–2 (3 labels)"),
+        "{info}"
+    );
+    ok(&[
+        "render",
+        "--scene",
+        s(&scene),
+        "--frames",
+        "2",
+        "--sync",
+        "--out",
+        s(&out),
+    ]);
     for (text, field) in [
         (layer("none.pxo"), "layer[0].volume"),
         (layer("corrupt.pxo"), "layer[0].volume"),
         (layer("small.pxo"), "layer[0].volume"),
         (layer("ml.pxo").repeat(4), "layer: 4 layers"),
+        (labels("no2.txt"), "label 2"),
+        (
+            layer("labels.pxo").replace("red.toml", "labels.txt"),
+            "layer[0].transfer_function",
+        ),
     ] {
         let bad = write(d.path().join("bad.toml"), &format!("{head}{text}"));
         let t = std::time::Instant::now();

@@ -15,6 +15,7 @@ use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Filter, Interpolation, Layer, Mode, RenderConfig, Shading};
 use parallax_common::protocol::FrameStats;
+use parallax_common::tf::labels::{self, LabelTable};
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::tools::{PackContext, Tool, MAX_ENHANCERS};
 use std::collections::VecDeque;
@@ -153,16 +154,41 @@ fn active_layers(
                 a.brick
             );
         }
+        let (f, file) = spec.function_file();
         let tf = match tfs.get(i) {
             Some(Some(tf)) => tf.clone(),
-            _ => TransferFunction::load(&spec.transfer_function)
-                .with_context(|| field("transfer_function", &spec.transfer_function))?,
+            _ => spec.load_function().with_context(|| field(f, file))?,
         };
         let s = &ldb.summary;
-        let (lo, hi) = (s.value_min as f64, s.value_max as f64);
-        let bins = PreintTable::suggested_bins(lo, hi, !ldb.header.info.voxel_type.is_float());
-        let empty = EmptinessTable::new(&tf, lo, hi, bins)?;
-        if empty.is_empty(lo, hi) {
+        // The table's range and bins, and the emptiness table.
+        let (lo, hi, bins, empty) = match (&spec.labels, &s.labels) {
+            // A node at each label, where the kernel reads its optics; the
+            // labels' steps tell which bricks draw nothing.
+            (Some(table), Some(labels)) => {
+                let t = LabelTable::load(table).with_context(|| field(f, file))?;
+                t.check(labels).with_context(|| {
+                    format!("{}: {}", field(f, file), spec.volume.display())
+                })?;
+                let (a, b) = (labels[0], labels[labels.len() - 1]);
+                let n = (b - a) as usize + 1;
+                let steps = labels::label_steps(&tf, a, b);
+                let (sa, sb) = (a as f64 - 0.5, b as f64 + 0.5);
+                let empty = EmptinessTable::new(&steps, sa, sb, 4 * n)?;
+                (a as f64, b as f64 + 1.0, n, empty)
+            }
+            (Some(_), None) => bail!(
+                "{}: {} is not a label volume: import it with --labels (its coarser levels would average labels into other labels)",
+                field(f, file),
+                spec.volume.display()
+            ),
+            (None, _) => {
+                let (lo, hi) = (s.value_min as f64, s.value_max as f64);
+                let int = !ldb.header.info.voxel_type.is_float();
+                let bins = PreintTable::suggested_bins(lo, hi, int);
+                (lo, hi, bins, EmptinessTable::new(&tf, lo, hi, bins)?)
+            }
+        };
+        if empty.is_empty(s.value_min as f64, s.value_max as f64) {
             continue; // nothing of it is visible: it costs nothing
         }
         if out.len() == parallax_common::config::MAX_LAYERS {
@@ -174,8 +200,7 @@ fn active_layers(
         out.push(ActiveLayer {
             index: i,
             spec: spec.clone(),
-            preint: PreintTable::new(&tf, lo, hi, bins)
-                .with_context(|| field("transfer_function", &spec.transfer_function))?,
+            preint: PreintTable::new(&tf, lo, hi, bins).with_context(|| field(f, file))?,
             empty,
             fill: s.value_min,
             db: Arc::new(ldb),
@@ -643,6 +668,8 @@ impl Renderer {
                 p.axis = [a.x as f32, a.y as f32, a.z as f32, 1.0];
                 p.angles = [from as f32, inv, 0.0, 0.0];
             }
+            // A label layer: nearest sampling, each label's own optics.
+            p.angles[2] = if l.spec.is_labels() { 1.0 } else { 0.0 };
         }
         out
     }

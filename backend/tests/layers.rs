@@ -26,7 +26,8 @@ fn write_tf(path: &Path, tf: &TransferFunction) -> PathBuf {
 fn layer(volume: &Path, tf: &Path) -> Layer {
     Layer {
         volume: volume.to_path_buf(),
-        transfer_function: tf.to_path_buf(),
+        transfer_function: Some(tf.to_path_buf()),
+        labels: None,
         opacity: 1.0,
         visible: true,
         view_opacity: None,

@@ -41,7 +41,8 @@ fn write_tf(dir: &Path, name: &str, tf: &TransferFunction) -> Result<PathBuf> {
 pub fn run(shot: Shot, cfg: &RenderConfig, rounds: usize, out: &Path) -> Result<Vec<LayerPoint>> {
     let layer = |tf: PathBuf| Layer {
         volume: shot.db.to_path_buf(),
-        transfer_function: tf,
+        transfer_function: Some(tf),
+        labels: None,
         opacity: 1.0,
         visible: true,
         view_opacity: None,

@@ -295,9 +295,16 @@ pub struct Layer {
     /// The layer's octree database (relative to the scene file).
     #[serde(with = "crate::paths::bytes")]
     pub volume: PathBuf,
-    /// Its transfer function file (relative to the scene file).
-    #[serde(with = "crate::paths::bytes")]
-    pub transfer_function: PathBuf,
+    /// Its transfer function file (relative to the scene file), for a
+    /// volume of values.
+    #[serde(default, with = "crate::paths::opt_bytes")]
+    pub transfer_function: Option<PathBuf>,
+    /// Its colour table (relative to the scene file), for a label volume
+    /// (`parallax import --labels`): TOML, 3D Slicer or ITK-SNAP
+    /// (`tf::labels`). The layer is sampled at the nearest voxel, and each
+    /// label the volume holds must be in the table.
+    #[serde(default, with = "crate::paths::opt_bytes")]
+    pub labels: Option<PathBuf>,
     /// Scales the layer's extinction and emission, in [0, 1].
     #[serde(default = "one")]
     pub opacity: f64,
@@ -307,6 +314,32 @@ pub struct Layer {
     /// The layer's opacity as a function of the view direction (G10 §4).
     #[serde(default)]
     pub view_opacity: Option<ViewOpacity>,
+}
+
+impl Layer {
+    /// The field that names the layer's function, and its file:
+    /// `transfer_function`, or `labels` for a label layer.
+    pub fn function_file(&self) -> (&'static str, &Path) {
+        match (&self.labels, &self.transfer_function) {
+            (Some(l), _) => ("labels", l),
+            (None, Some(t)) => ("transfer_function", t),
+            (None, None) => ("transfer_function", Path::new("")),
+        }
+    }
+
+    /// A label layer (its function is a colour table).
+    pub fn is_labels(&self) -> bool {
+        self.labels.is_some()
+    }
+
+    /// The layer's transfer function: its file's, or its colour table's
+    /// steps (`LabelTable::transfer_function`).
+    pub fn load_function(&self) -> Result<crate::tf::TransferFunction> {
+        match &self.labels {
+            Some(l) => Ok(crate::tf::labels::LabelTable::load(l)?.transfer_function()),
+            None => crate::tf::TransferFunction::load(self.function_file().1),
+        }
+    }
 }
 
 /// View-dependent layer opacity (G10 §4: "adaptively showing different
@@ -352,8 +385,13 @@ fn check_layers(file: &Path, layers: &[Layer]) -> Result<()> {
         );
     }
     for (i, l) in layers.iter().enumerate() {
-        crate::tf::TransferFunction::load(&l.transfer_function)
-            .with_context(|| format!("{f}: layer[{i}].transfer_function"))?;
+        if l.labels.is_some() == l.transfer_function.is_some() {
+            bail!(
+                "{f}: layer[{i}]: give either transfer_function (a volume of values) or labels (a label volume's colour table)"
+            );
+        }
+        l.load_function()
+            .with_context(|| format!("{f}: layer[{i}].{}", l.function_file().0))?;
         if !(0.0..=1.0).contains(&l.opacity) {
             bail!(
                 "{f}: layer[{i}].opacity must be in [0, 1] (got {})",
@@ -390,7 +428,8 @@ impl Scene {
         s.display = s.display.map(|d| resolve(path, &d));
         for l in &mut s.layers {
             l.volume = resolve(path, &l.volume);
-            l.transfer_function = resolve(path, &l.transfer_function);
+            l.transfer_function = l.transfer_function.as_ref().map(|t| resolve(path, t));
+            l.labels = l.labels.as_ref().map(|t| resolve(path, t));
         }
         finite(f, "placement.center", &s.placement.center)?;
         finite(f, "placement.rotation_deg", &s.placement.rotation_deg)?;
@@ -898,7 +937,27 @@ mod tests {
             (v.factor(20.0), v.factor(45.0), v.factor(90.0)),
             (0.0, 0.5, 1.0)
         );
+        // A label layer: its colour table resolves against the scene too.
+        write(
+            d.path(),
+            "labels.txt",
+            "0 clear 0 0 0 0\n1 one 255 0 0 255\n",
+        );
+        let labels = "[[layer]]\nvolume = \"l.pxo\"\nlabels = \"labels.txt\"\n";
+        let s = Scene::load(&write(d.path(), "s2.toml", &format!("{head}{labels}"))).unwrap();
+        assert!(s.layers[0].is_labels());
+        assert_eq!(s.layers[0].function_file().1, d.path().join("labels.txt"));
+        assert_eq!(s.layers[0].load_function().unwrap().points().len(), 2);
         let cases = [
+            (
+                format!("{labels}transfer_function = \"tf.toml\"\n"),
+                "layer[0]: give either transfer_function",
+            ),
+            (
+                "[[layer]]\nvolume = \"l.pxo\"\n".to_string(),
+                "layer[0]: give either transfer_function",
+            ),
+            (labels.replace("labels.txt", "tf.toml"), "layer[0].labels"),
             (layer.repeat(4), "layer: 4 layers"),
             (
                 layer.replace("\"tf.toml", "\"none.toml"),

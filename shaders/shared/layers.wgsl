@@ -14,17 +14,62 @@
 // its view-dependent factor (G10 §4: "controlling a layer's opacity as a
 // function of the view direction"). LAYERS (the chain module) is their
 // count; without layers none of this is compiled in.
+//
+// A label layer (a segmentation and its colour table, `angles.z` = 1) is
+// read at the nearest voxel, whole labels, never interpolated into another
+// label; its table has a node at each label, holding the label's optics,
+// and a segment between two labels takes each end's for half its length
+// (`label_average`).
 
 #import bindings
 #import preint
 
 var<private> layer_p: array<LayerParams, 3>;
+// Whether any layer is a label layer.
+var<private> layer_labels: bool;
 
 // The layers' constants, copied once per ray like the frame's.
 fn load_layers() {
     if (LAYERS > 0u) {
         layer_p = layer_uniform;
+        layer_labels = false;
+        for (var k = 0u; k < LAYERS; k = k + 1u) {
+            layer_labels = layer_labels || is_label(k);
+        }
     }
+}
+
+fn is_label(k: u32) -> bool {
+    return layer_p[k].angles.z > 0.5;
+}
+
+// The layers' values at p from the layered pool's texel `v` there and the
+// slot's ranges (value = lo + span · stored); a label layer's is the
+// nearest voxel's label.
+fn layer_values(leaf: Leaf, p: vec3<f32>, v: vec4<f32>, lo: vec3<f32>, span: vec3<f32>) -> vec3<f32> {
+    var lay = lo + span * v.yzw;
+    if (layer_labels) {
+        let near = lo + span * sample_nearest(leaf, p).yzw;
+        for (var k = 0u; k < LAYERS; k = k + 1u) {
+            if (is_label(k)) {
+                lay[k] = round(near[k]);
+            }
+        }
+    }
+    return lay;
+}
+
+// A label's node in layer `p`'s table (`tf_entry(p.at.x + node)`).
+fn label_node(p: LayerParams, label: f32) -> u32 {
+    return u32(clamp((label - p.table.x) * p.table.y + 0.5, 0.0, p.table.z));
+}
+
+// A label layer's averages over a segment from label `a` to label `b`: the
+// boundary between two labels lies somewhere between the samples, and each
+// end's label holds for half the segment (G10 Eq. 2 over a medium constant
+// on either side), read at the labels' nodes.
+fn label_average(p: LayerParams, a: f32, b: f32) -> vec4<f32> {
+    return 0.5 * (tf_entry(p.at.x + label_node(p, a)) + tf_entry(p.at.x + label_node(p, b)));
 }
 
 // Bin j's average over [j + ta, j + tb] in layer `p`'s table
@@ -136,6 +181,9 @@ struct LayerSeg {
 
 // Layer k's averages over the segment, from the ends or from the table.
 fn layer_term(k: u32, a: f32, b: f32, ea: TfEnd, eb: TfEnd) -> vec4<f32> {
+    if (layer_labels && is_label(k)) {
+        return label_average(layer_p[k], a, b);
+    }
     if (LAYER_END) {
         return end_average(ea, eb);
     }

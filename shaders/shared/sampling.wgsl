@@ -164,6 +164,14 @@ fn sample_layered(leaf: Leaf, p: vec3<f32>) -> vec4<f32> {
     return mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
 }
 
+// The stored values of the voxel nearest p (a label layer's whole labels,
+// `layer_values`).
+fn sample_nearest(leaf: Leaf, p: vec3<f32>) -> vec4<f32> {
+    let side = f32(frame.pool.w);
+    let local = clamp(p * leaf.to_local + leaf.shift, vec3<f32>(0.0), vec3<f32>(side - 1.0));
+    return textureLoad(pool, leaf.origin + vec3<i32>(round(local)), 0);
+}
+
 // One axis of the gradient where samples may lack data: central where both
 // neighbours have data, one-sided against the centre where one has, 0 else.
 fn partial(a: f32, b: f32, c: f32, h: f32) -> f32 {

@@ -41,6 +41,16 @@ pub struct Args {
     /// first, until the voxels are near-cubic)
     #[arg(long)]
     isotropic_levels: bool,
+    /// A label volume (segmentation): whole labels, stored exactly, each
+    /// coarser voxel one of the labels it covers (never an average); the
+    /// database lists its labels for a layer's colour table
+    #[arg(long)]
+    labels: bool,
+    /// A label volume made from the input: label k where the value is at
+    /// or above the k-th of these ascending thresholds (0 below the first);
+    /// implies --labels
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    labels_from_thresholds: Option<Vec<f32>>,
     /// Raw input: X,Y,Z
     #[arg(long, value_parser = args::list::<usize, 3>)]
     dims: Option<[usize; 3]>,
@@ -111,6 +121,9 @@ pub fn run(a: Args) -> Result<()> {
             },
         },
     )?;
+    if let Some(t) = a.labels_from_thresholds.clone() {
+        src = Box::new(data::Thresholded::new(src, t)?);
+    }
     let described = src.describe();
     if let Some(d) = &described {
         eprintln!("note: {d}");
@@ -123,6 +136,7 @@ pub fn run(a: Args) -> Result<()> {
         memory_mb: a.memory_mb,
         progress: std::io::stderr().is_terminal(),
         isotropic_levels: a.isotropic_levels,
+        labels: a.labels || a.labels_from_thresholds.is_some(),
     };
     let name = a.input.display().to_string();
     let source = match &described {
@@ -151,6 +165,9 @@ pub fn run(a: Args) -> Result<()> {
         r.seconds,
         r.source_bytes as f64 / 1e6 / r.seconds.max(1e-9)
     );
+    if let Some(l) = &r.summary.labels {
+        println!("labels: {}", store::label_list(l));
+    }
     if let Some(kb) = peak_rss_kib() {
         println!("peak resident memory: {:.1} MiB", kb as f64 / 1024.0);
     }

@@ -23,8 +23,13 @@ pub fn run(a: Args) -> Result<()> {
         for (i, l) in scene.layers.iter().enumerate() {
             println!();
             println!(
-                "layer[{i}]:      transfer function {}, opacity {}{}{}",
-                l.transfer_function.display(),
+                "layer[{i}]:      {} {}, opacity {}{}{}",
+                if l.is_labels() {
+                    "labels"
+                } else {
+                    "transfer function"
+                },
+                l.function_file().1.display(),
                 l.opacity,
                 if l.visible { "" } else { ", hidden" },
                 l.view_opacity.map_or(String::new(), |v| format!(

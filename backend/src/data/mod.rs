@@ -405,6 +405,72 @@ pub(crate) fn check_finite(
     Ok(())
 }
 
+/// A source's values made labels by thresholds (`parallax import
+/// --labels-from-thresholds`): a voxel's label is the number of thresholds
+/// at or below its value (0 below the first), NaN stays no data. A label
+/// volume made from the volume itself, for a layer that names its tissues.
+pub struct Thresholded {
+    inner: Box<dyn VolumeSource + Send>,
+    thresholds: Vec<f32>,
+    info: VolumeInfo,
+}
+
+impl Thresholded {
+    /// `thresholds` must be finite and strictly ascending (at most 255).
+    pub fn new(inner: Box<dyn VolumeSource + Send>, thresholds: Vec<f32>) -> Result<Self> {
+        if thresholds.is_empty()
+            || thresholds.len() > 255
+            || thresholds.iter().any(|t| !t.is_finite())
+            || thresholds.windows(2).any(|w| w[0] >= w[1])
+        {
+            bail!(
+                "--labels-from-thresholds {thresholds:?}: give 1 to 255 finite thresholds in ascending order"
+            );
+        }
+        let info = VolumeInfo {
+            voxel_type: VoxelType::U8,
+            ..inner.info().clone()
+        };
+        Ok(Thresholded {
+            inner,
+            thresholds,
+            info,
+        })
+    }
+}
+
+impl VolumeSource for Thresholded {
+    fn info(&self) -> &VolumeInfo {
+        &self.info
+    }
+
+    fn read_slices(&mut self, out: &mut [f32]) -> Result<()> {
+        self.inner.read_slices(out)?;
+        for v in out.iter_mut() {
+            if !v.is_nan() {
+                *v = self.thresholds.partition_point(|t| t <= v) as f32;
+            }
+        }
+        Ok(())
+    }
+
+    fn describe(&self) -> Option<String> {
+        let own = format!("labels by thresholds {:?}", self.thresholds);
+        Some(match self.inner.describe() {
+            Some(d) => format!("{d}; {own}"),
+            None => own,
+        })
+    }
+
+    fn set_nan_empty(&mut self) {
+        self.inner.set_nan_empty();
+    }
+
+    fn buffer_bytes(&self) -> u64 {
+        self.inner.buffer_bytes()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -83,7 +83,8 @@ pub struct LayerParams {
     /// The view-dependent opacity's axis (volume space, unit); w: 1 where
     /// the layer has one.
     pub axis: [f32; 4],
-    /// Its angles (radians): from, 1 / (to − from), 0, 0.
+    /// Its angles (radians): from, 1 / (to − from); z: 1 for a label layer
+    /// (nearest sampling, one bin per label); w: 0.
     pub angles: [f32; 4],
 }
 

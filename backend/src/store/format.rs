@@ -30,12 +30,15 @@ pub const FOOTER_MAGIC: [u8; 8] = *b"PXOEND\0\0";
 /// checksum (`cells`: two bytes a cell; formats 1–3 get them computed when
 /// a brick is uploaded); format 5 records which axes each level halves
 /// (`OctreeLayout::splits`: levels over thick slices halve only the finer
-/// axes; formats 1–4 are isotropic octrees).
-pub const VERSION: u32 = 5;
+/// axes; formats 1–4 are isotropic octrees); format 6 records a label
+/// volume's labels in the import summary (`Summary::labels`).
+pub const VERSION: u32 = 6;
 /// The first format whose bricks carry their macrocell ranges.
 pub const CELLS_VERSION: u32 = 4;
 /// The first format whose levels may halve only some axes.
 pub const SPLITS_VERSION: u32 = 5;
+/// The first format whose summary may list a label volume's labels.
+pub const LABELS_VERSION: u32 = 6;
 /// The oldest format read.
 pub const OLDEST_VERSION: u32 = 1;
 /// Bytes before the header: magic, version, header length, header CRC.
@@ -142,6 +145,49 @@ pub struct Summary {
     pub quant_max: f64,
     /// Voxels the error figures were measured on.
     pub quant_samples: u64,
+    /// A label volume (imported with `--labels`): the labels it holds,
+    /// ascending. Its voxels are whole labels and its coarser levels keep
+    /// labels (`store::import`), so a colour table can be checked against
+    /// them before anything is drawn. `None`: a volume of values.
+    pub labels: Option<Vec<u32>>,
+}
+
+/// The most distinct labels a label volume may hold.
+pub const MAX_LABELS: usize = 1 << 16;
+
+/// The summary of formats 1–5 (no labels).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SummaryV5 {
+    pub value_min: f32,
+    pub value_max: f32,
+    pub quant_rms: f64,
+    pub quant_max: f64,
+    pub quant_samples: u64,
+}
+
+/// The trailer of formats 1–5.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrailerV5 {
+    pub nodes: Vec<NodeRecord>,
+    pub summary: SummaryV5,
+}
+
+impl TrailerV5 {
+    /// The same trailer in this build's terms (a volume of values).
+    pub fn upgrade(self) -> Trailer {
+        let s = self.summary;
+        Trailer {
+            nodes: self.nodes,
+            summary: Summary {
+                value_min: s.value_min,
+                value_max: s.value_max,
+                quant_rms: s.quant_rms,
+                quant_max: s.quant_max,
+                quant_samples: s.quant_samples,
+                labels: None,
+            },
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -41,6 +41,11 @@ pub struct ImportOptions {
     /// (the octree of formats 1–4; otherwise levels over thick slices halve
     /// only the finer axes, `OctreeLayout::for_spacing`).
     pub isotropic_levels: bool,
+    /// A label volume: every voxel a whole label (0 to 2³²−1, or NaN for no
+    /// data) and each coarser voxel one of the labels it covers, never an
+    /// average ([`label_of`]); bricks are stored exactly and the summary
+    /// lists the labels.
+    pub labels: bool,
 }
 
 impl Default for ImportOptions {
@@ -53,6 +58,7 @@ impl Default for ImportOptions {
             memory_mb: 2048,
             progress: false,
             isotropic_levels: false,
+            labels: false,
         }
     }
 }
@@ -131,6 +137,7 @@ pub fn import(
         quant_sq: 0.0,
         quant_max: 0.0,
         quant_n: 0,
+        inexact: None,
     };
 
     let bar = if opts.progress {
@@ -144,6 +151,7 @@ pub fn import(
 
     let (mut vmin, mut vmax) = (f32::INFINITY, f32::NEG_INFINITY);
     let mut no_data = 0u64;
+    let mut labels = std::collections::BTreeSet::new();
     let leaf = layout.leaf_level() as usize;
     // The source is read on a thread of its own, PREFETCH slices ahead, so
     // that reading and decoding the input overlap the levels' averaging
@@ -165,7 +173,7 @@ pub fn import(
                 }
             }
         });
-        for _ in 0..nz {
+        for z in 0..nz {
             let slice = rx
                 .recv()
                 .map_err(|_| anyhow::anyhow!("{source_name}: the reader stopped"))??;
@@ -173,6 +181,10 @@ pub fn import(
             vmin = vmin.min(lo);
             vmax = vmax.max(hi);
             no_data += nan;
+            if opts.labels {
+                slice_labels(&slice, info.dims, z, &mut labels)
+                    .with_context(|| format!("{source_name}: --labels"))?;
+            }
             push_slice(&mut levels, leaf, slice, &mut sink)?;
             bar.inc(1);
         }
@@ -191,6 +203,12 @@ pub fn import(
         }
     }
     bar.finish_and_clear();
+    if let Some(key) = sink.inexact {
+        bail!(
+            "{source_name}: --labels: brick {key} spans more labels than --quantize {} stores exactly; import with --quantize none",
+            opts.encoding.name()
+        );
+    }
 
     let summary = Summary {
         value_min: vmin,
@@ -202,6 +220,7 @@ pub fn import(
         },
         quant_max: sink.quant_max,
         quant_samples: sink.quant_n,
+        labels: opts.labels.then(|| labels.into_iter().collect()),
     };
     let (stored, empty) = (sink.stored, sink.empty);
     let file_bytes = writer.finish(summary.clone())?;
@@ -369,13 +388,103 @@ struct Sink<'a> {
     quant_sq: f64,
     quant_max: f64,
     quant_n: u64,
+    /// Label import: the first brick whose encoding changed a label.
+    inexact: Option<NodeKey>,
+}
+
+/// Checks that a source slice (`z`) of a label volume holds whole labels,
+/// and adds them to `labels`.
+fn slice_labels(
+    slice: &[f32],
+    dims: [usize; 3],
+    z: usize,
+    labels: &mut std::collections::BTreeSet<u32>,
+) -> Result<()> {
+    let bad = slice
+        .par_iter()
+        .position_first(|&v| !v.is_nan() && !whole_label(v));
+    if let Some(i) = bad {
+        bail!(
+            "voxel ({}, {}, {z}) holds {}, which is not a label (labels are whole numbers from 0 to {}; a fraction is an uncertain label)",
+            i % dims[0],
+            i / dims[0],
+            slice[i],
+            u32::MAX
+        );
+    }
+    let found = slice
+        .par_chunks(1 << 16)
+        .map(|c| {
+            let mut set = std::collections::BTreeSet::new();
+            let mut last = f32::NAN;
+            for &v in c {
+                // Runs of one label are the rule: skip the set when unchanged.
+                if v != last && !v.is_nan() {
+                    set.insert(v as u32);
+                    last = v;
+                }
+            }
+            set
+        })
+        .reduce(std::collections::BTreeSet::new, |mut a, b| {
+            a.extend(b);
+            a
+        });
+    labels.extend(found);
+    if labels.len() > crate::store::MAX_LABELS {
+        bail!(
+            "more than {} distinct labels by slice {z}: not a label volume",
+            crate::store::MAX_LABELS
+        );
+    }
+    Ok(())
+}
+
+/// A value that is a label: a whole number from 0 to 2³²−1.
+fn whole_label(v: f32) -> bool {
+    (0.0..=u32::MAX as f32).contains(&v) && v.fract() == 0.0
+}
+
+/// What a coarser voxel of a label volume holds, of the labels `taps` it
+/// covers (NaN: no data): the most frequent label other than 0 (the
+/// background) where there is one, the smallest on a tie; else 0 where a
+/// tap is 0; else NaN. A label is never averaged into another, and a thin
+/// structure stays visible in the coarser levels rather than vanishing
+/// into the background.
+pub fn label_of(taps: &[f32]) -> f32 {
+    let mut best = f32::NAN;
+    let mut best_n = 0;
+    let mut background = false;
+    for (i, &v) in taps.iter().enumerate() {
+        if v.is_nan() {
+            continue;
+        }
+        if v == 0.0 {
+            background = true;
+            continue;
+        }
+        let n = taps[i..].iter().filter(|&&w| w == v).count();
+        let earlier = taps[..i].contains(&v);
+        if !earlier && (n > best_n || (n == best_n && v < best)) {
+            best = v;
+            best_n = n;
+        }
+    }
+    if best_n > 0 {
+        best
+    } else if background {
+        0.0
+    } else {
+        f32::NAN
+    }
 }
 
 fn push_slice(levels: &mut [Level], l: usize, slice: Vec<f32>, sink: &mut Sink) -> Result<()> {
     let parent_slice = {
         let lv = &mut levels[l];
         let [hx, hy, hz] = lv.halve;
-        let half = (l > 0).then(|| halve_xy(&slice, lv.dims[0], lv.dims[1], hx, hy));
+        let labels = sink.opts.labels;
+        let half = (l > 0).then(|| halve_xy(&slice, lv.dims[0], lv.dims[1], hx, hy, labels));
         lv.slices.push_back(slice);
         lv.received += 1;
         while lv.next_row < lv.bricks[2] && lv.received > lv.last_needed(lv.next_row) {
@@ -386,7 +495,13 @@ fn push_slice(levels: &mut [Level], l: usize, slice: Vec<f32>, sink: &mut Sink) 
             (Some(h), Some(p)) => Some(
                 p.par_iter()
                     .zip(h.par_iter())
-                    .map(|(&a, &b)| mean2(a, b))
+                    .map(|(&a, &b)| {
+                        if labels {
+                            label_of(&[a, b])
+                        } else {
+                            mean2(a, b)
+                        }
+                    })
                     .collect(),
             ),
             (Some(h), None) => {
@@ -415,8 +530,15 @@ fn mean2(a: f32, b: f32) -> f32 {
 /// 2×2 average of a slice in x and y (2×1, 1×2 or a copy where only one
 /// or neither is halved); at an odd edge the average is over the voxels that
 /// exist, and no-data (NaN) voxels are left out of it (NaN only where all
-/// four are).
-fn halve_xy(s: &[f32], nx: usize, ny: usize, halve_x: bool, halve_y: bool) -> Vec<f32> {
+/// four are). Of a label volume (`labels`), [`label_of`] the voxels instead.
+fn halve_xy(
+    s: &[f32],
+    nx: usize,
+    ny: usize,
+    halve_x: bool,
+    halve_y: bool,
+    labels: bool,
+) -> Vec<f32> {
     let pair = |i: usize, n: usize, halve: bool| {
         if halve {
             (2 * i, (2 * i + 1).min(n - 1))
@@ -444,6 +566,10 @@ fn halve_xy(s: &[f32], nx: usize, ny: usize, halve_x: bool, halve_y: bool) -> Ve
                     taps[3] = s[y1 * nx + x1];
                 }
             }
+            if labels {
+                *o = label_of(&taps);
+                continue;
+            }
             let (sum, n) = taps
                 .iter()
                 .filter(|v| !v.is_nan())
@@ -461,6 +587,8 @@ struct Encoded {
     quant_sq: f64,
     quant_max: f64,
     quant_n: u64,
+    /// A label brick whose encoding changed a value.
+    inexact: bool,
 }
 
 /// Cuts row `lv.next_row` into bricks, encodes and writes them, and drops the
@@ -493,6 +621,9 @@ fn emit_row(lv: &mut Level, sink: &mut Sink) -> Result<()> {
             sink.quant_sq += e.quant_sq;
             sink.quant_max = sink.quant_max.max(e.quant_max);
             sink.quant_n += e.quant_n;
+            if e.inexact && sink.inexact.is_none() {
+                sink.inexact = Some(e.key);
+            }
         }
     }
     lv.next_row += 1;
@@ -556,6 +687,7 @@ fn encode_brick(
         quant_sq: 0.0,
         quant_max: 0.0,
         quant_n: 0,
+        inexact: false,
     };
     if empty {
         return e;
@@ -564,6 +696,12 @@ fn encode_brick(
     let (mut bytes, decoded) = codec::encode_decoded(&values, min, max, opts.encoding, opts.codec);
     // Its macrocell ranges follow the encoded values (format 4).
     let seen = decoded.as_deref().unwrap_or(&values);
+    // A label stored as another would be drawn as another.
+    e.inexact = opts.labels
+        && seen
+            .iter()
+            .zip(&values)
+            .any(|(d, v)| d.to_bits() != v.to_bits() && !(d.is_nan() && v.is_nan()));
     let cell_ranges = cells::ranges_of(b, seen);
     bytes.extend_from_slice(&cells::encode(&cell_ranges, min, max));
     if let (true, Some(decoded)) = (leaf, &decoded) {

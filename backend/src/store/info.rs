@@ -42,6 +42,9 @@ pub fn describe(db: &OctreeDb) -> String {
         h.info.spacing[0], h.info.spacing[1], h.info.spacing[2]
     );
     let _ = writeln!(o, "value range:   {} … {}", s.value_min, s.value_max);
+    if let Some(l) = &s.labels {
+        let _ = writeln!(o, "labels:        {}", label_list(l));
+    }
     let _ = writeln!(
         o,
         "bricks:        {}³ (+{} overlap), encoding {}, empty below {}",
@@ -126,4 +129,31 @@ pub fn verify(db: &OctreeDb) -> Result<VerifyReport> {
         bricks: stored.len(),
         bytes: stored.iter().map(|n| n.len as u64).sum(),
     })
+}
+
+/// A label volume's labels as a short list: runs of consecutive labels as
+/// ranges ("0–3, 7, 10–12"), at most 20 entries then the count.
+pub fn label_list(labels: &[u32]) -> String {
+    let mut runs: Vec<(u32, u32)> = Vec::new();
+    for &l in labels {
+        match runs.last_mut() {
+            Some((_, hi)) if *hi + 1 == l => *hi = l,
+            _ => runs.push((l, l)),
+        }
+    }
+    let mut parts: Vec<String> = runs
+        .iter()
+        .take(20)
+        .map(|&(a, b)| {
+            if a == b {
+                a.to_string()
+            } else {
+                format!("{a}–{b}")
+            }
+        })
+        .collect();
+    if runs.len() > 20 {
+        parts.push("…".into());
+    }
+    format!("{} ({} labels)", parts.join(", "), labels.len())
 }

@@ -9,7 +9,8 @@
 //! and central-difference gradients (G08 §3). Level 0 is the root; level L
 //! holds the source voxels. A level-l voxel is the average of the 2×2×2
 //! level-(l+1) voxels it covers (those inside the volume), so inner nodes are
-//! the filtered version of their children at the same B³ resolution.
+//! the filtered version of their children at the same B³ resolution; of a
+//! label volume it is one of the labels it covers (`import::label_of`).
 //!
 //! * [`layout`]: the geometry of levels, bricks and nodes.
 //! * [`format`]: the on-disk header, node records, trailer and footer.
@@ -29,8 +30,9 @@ pub mod writer;
 
 pub use cells::{Brick, LayerBricks};
 pub use codec::BrickEncoding;
-pub use format::{Header, NodeRecord, Summary};
+pub use format::{Header, NodeRecord, Summary, MAX_LABELS};
 pub use import::{import, ImportOptions, ImportReport};
+pub use info::label_list;
 pub use layout::{NodeKey, OctreeLayout, OVERLAP};
 pub use reader::OctreeDb;
 pub use writer::OctreeWriter;

@@ -5,8 +5,9 @@
 use super::cells::{self, Brick};
 use super::codec::{self, BrickEncoding, Framing};
 use super::format::{
-    bincode_config, Footer, Header, HeaderV4, NodeRecord, Summary, Trailer, CELLS_VERSION,
-    FOOTER_LEN, MAGIC, OLDEST_VERSION, PREAMBLE_LEN, SPLITS_VERSION, VERSION,
+    bincode_config, Footer, Header, HeaderV4, NodeRecord, Summary, Trailer, TrailerV5,
+    CELLS_VERSION, FOOTER_LEN, LABELS_VERSION, MAGIC, MAX_LABELS, OLDEST_VERSION, PREAMBLE_LEN,
+    SPLITS_VERSION, VERSION,
 };
 use super::layout::{NodeKey, OctreeLayout};
 use anyhow::{bail, Context, Result};
@@ -95,11 +96,26 @@ impl OctreeDb {
         if crc32fast::hash(&tbytes) != footer.trailer_crc {
             bail!("{name}: node table checksum mismatch (corrupt node table)");
         }
-        let (trailer, _): (Trailer, usize) =
+        let trailer: Trailer = if version >= LABELS_VERSION {
             bincode::serde::decode_from_slice(&tbytes, bincode_config())
-                .with_context(|| format!("{name}: corrupt node table"))?;
+                .with_context(|| format!("{name}: corrupt node table"))?
+                .0
+        } else {
+            let (old, _): (TrailerV5, usize) =
+                bincode::serde::decode_from_slice(&tbytes, bincode_config())
+                    .with_context(|| format!("{name}: corrupt node table"))?;
+            old.upgrade()
+        };
 
         check_header(&header).map_err(|e| anyhow::anyhow!("{name}: header: {e}"))?;
+        if let Some(labels) = &trailer.summary.labels {
+            if labels.len() > MAX_LABELS || labels.windows(2).any(|w| w[0] >= w[1]) {
+                bail!(
+                    "{name}: summary: the label list ({} labels) is not {MAX_LABELS} or fewer distinct labels in ascending order",
+                    labels.len()
+                );
+            }
+        }
         let layout = header.layout;
         if trailer.nodes.len() > layout.node_count() {
             bail!(

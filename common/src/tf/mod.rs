@@ -15,6 +15,8 @@
 //! * [`closed::ClosedForm`]: the same averages of τ and k̃ in closed form,
 //!   from a few coefficients per piece between control points, for the
 //!   kernel's `preintegration = "analytic"`.
+//! * [`labels::LabelTable`]: a label volume's colour table (TOML, 3D
+//!   Slicer, ITK-SNAP) as a transfer function of steps, one per label.
 //! * [`EmptinessTable`]: integer prefix counts that answer "is τ ≡ 0 on
 //!   [min, max]?" conservatively, for empty-space skipping.
 //!
@@ -24,6 +26,7 @@
 pub mod closed;
 mod empty;
 mod function;
+pub mod labels;
 mod preint;
 
 #[cfg(test)]
@@ -31,8 +34,8 @@ mod tests;
 
 pub use empty::EmptinessTable;
 pub use function::{
-    ControlPoint, Optics, TransferFunction, DEFAULT_IMPORTANCE, DEFAULT_REFRACTION, MAX_ABS_VALUE,
-    MAX_EXTINCTION,
+    alpha_to_extinction, srgb_to_linear, ControlPoint, Optics, TransferFunction,
+    DEFAULT_IMPORTANCE, DEFAULT_REFRACTION, MAX_ABS_VALUE, MAX_ALPHA, MAX_EXTINCTION,
 };
 pub use preint::{
     alpha, emission_weight, premultiplied_color, Channel, PreintLayout, PreintTable, SegmentOptics,

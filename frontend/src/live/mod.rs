@@ -267,8 +267,13 @@ fn run(opts: ServeOptions, transport: &mut dyn Transport) -> Result<()> {
         .iter()
         .enumerate()
         .map(|(i, l)| {
-            TransferFunction::load(&l.transfer_function)
-                .with_context(|| format!("{}: layer[{i}].transfer_function", opts.scene.display()))
+            l.load_function().with_context(|| {
+                format!(
+                    "{}: layer[{i}].{}",
+                    opts.scene.display(),
+                    l.function_file().0
+                )
+            })
         })
         .collect::<Result<Vec<_>>>()?;
     let state = LiveState::from_scene(&scene, &display, tf, layer_tfs);

@@ -217,7 +217,7 @@ pub fn hello(
         // The registered layers, named by their volume and function files.
         "layers": scene.layers.iter().map(|l| {
             let name = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-            format!("{} · {}", name(&l.volume), name(&l.transfer_function))
+            format!("{} · {}", name(&l.volume), name(l.function_file().1))
         }).collect::<Vec<_>>(),
         "record_dir": record_dir.display().to_string(),
     })

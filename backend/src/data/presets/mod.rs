@@ -74,9 +74,9 @@ use serde_json::{Map, Value};
 
 use parallax_common::tf::{ControlPoint, TransferFunction, DEFAULT_IMPORTANCE, DEFAULT_REFRACTION};
 
-/// Largest opacity converted to an extinction: α = 1 (fully opaque within one
-/// unit distance) becomes τ = −ln(10⁻⁶)/u ≈ 13.8/u instead of infinity.
-pub const MAX_ALPHA: f64 = 1.0 - 1e-6;
+// The opacity → extinction conversion and the sRGB decoding curve are
+// shared with label colour tables (`parallax_common::tf::labels`).
+pub use parallax_common::tf::{alpha_to_extinction, srgb_to_linear, MAX_ALPHA};
 
 /// Default of [`ImportOptions::tolerance`]: α and displayed colour within
 /// 0.005 (about 1.3 steps of 8 bits) of the source curves.
@@ -525,29 +525,6 @@ pub fn import_slicer_vp_json(
     let root = parse_json(text, origin)?;
     let src = slicer_vp_json_source(&root, origin)?;
     convert(src, PresetFormat::SlicerVpJson, origin, opts)
-}
-
-/// Extinction τ for a VTK opacity α per `unit` length (`unit` > 0):
-/// −ln(1 − α)/unit, α clamped to [0, [`MAX_ALPHA`]] (so finite and ≥ 0; a
-/// NaN α gives 0).
-pub fn alpha_to_extinction(alpha: f64, unit: f64) -> f64 {
-    let a = alpha.clamp(0.0, MAX_ALPHA);
-    let tau = -(-a).ln_1p() / unit;
-    if tau > 0.0 {
-        tau
-    } else {
-        0.0
-    }
-}
-
-/// The sRGB decoding curve (IEC 61966-2-1): display value → linear, [0, 1].
-pub fn srgb_to_linear(c: f64) -> f64 {
-    let c = c.clamp(0.0, 1.0);
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
 }
 
 /// The sRGB encoding curve: linear → display value, [0, 1].
