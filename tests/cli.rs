@@ -725,6 +725,50 @@ fn layers_are_listed_rendered_and_bad_ones_refused_naming_the_scene() {
         s(&out),
     ]);
     assert!(out.join("frame_00002/w.png").exists(), "{text}");
+    // A script switches the layer's function to one that shows nothing:
+    // the image is the volume's alone, bit for bit.
+    write_all(
+        d.path(),
+        &[
+            (
+                "clear.toml",
+                "[[point]]\nvalue = 0\ncolor = [0, 0, 0]\nextinction = 0\n",
+            ),
+            (
+                "switch.toml",
+                "[[key]]\nframe = 0\nlayer_functions = [{ index = 0, file = \"clear.toml\" }]\n",
+            ),
+        ],
+    );
+    let alone = write(d.path().join("alone.toml"), head);
+    let (out_alone, out_switched) = (d.path().join("alone"), d.path().join("switched"));
+    let frames = ["--frames", "3", "--sync", "--out"];
+    ok(&[
+        &["render", "--scene", s(&alone)][..],
+        &frames,
+        &[s(&out_alone)],
+    ]
+    .concat());
+    let script = d.path().join("switch.toml");
+    let switched = [
+        &["render", "--scene", s(&scene), "--script", s(&script)][..],
+        &frames,
+        &[s(&out_switched)],
+    ]
+    .concat();
+    ok(&switched);
+    let png = |o: &Path| std::fs::read(o.join("frame_00002/w.png")).unwrap();
+    let with_layer = png(&out);
+    assert_eq!(
+        png(&out_switched),
+        png(&out_alone),
+        "the layer's function switched to nothing"
+    );
+    assert_ne!(
+        with_layer,
+        png(&out_alone),
+        "the layer shows before the switch"
+    );
     // A label layer: labels made of the volume by thresholds, drawn through
     // an ITK-SNAP label description file.
     let imported = ok(&[

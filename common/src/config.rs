@@ -335,9 +335,20 @@ impl Layer {
     /// The layer's transfer function: its file's, or its colour table's
     /// steps (`LabelTable::transfer_function`).
     pub fn load_function(&self) -> Result<crate::tf::TransferFunction> {
-        match &self.labels {
-            Some(l) => Ok(crate::tf::labels::LabelTable::load(l)?.transfer_function()),
-            None => crate::tf::TransferFunction::load(self.function_file().1),
+        self.load_function_from(self.function_file().1)
+    }
+
+    /// The function in `file` as this layer reads it: a transfer function
+    /// (`[[point]]`s; a recording writes a label layer's edited function
+    /// so), or a label layer's colour table.
+    pub fn load_function_from(&self, file: &Path) -> Result<crate::tf::TransferFunction> {
+        let text = std::fs::read_to_string(file)
+            .with_context(|| format!("{}: cannot read", file.display()))?;
+        let name = file.display().to_string();
+        if self.is_labels() && !text.contains("[[point]]") {
+            Ok(crate::tf::labels::LabelTable::parse(&text, &name)?.transfer_function())
+        } else {
+            crate::tf::TransferFunction::from_toml_str(&text, &name)
         }
     }
 }

@@ -146,6 +146,16 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         tools: scene.tools.clone(),
     })?;
     let script = opts.script.as_deref().map(Script::load).transpose()?;
+    if let (Some(sc), Some(path)) = (&script, &opts.script) {
+        if let Some(i) = sc.layer_indices().find(|&i| i >= scene.layers.len()) {
+            anyhow::bail!(
+                "{}: layer_functions: index {i}, but {} has {} layers",
+                path.display(),
+                opts.scene.display(),
+                scene.layers.len()
+            );
+        }
+    }
     let until_converged = opts.frames == 0 && script.is_none();
     let frames = match (opts.frames, &script) {
         (0, Some(s)) => s.frames,
@@ -159,6 +169,8 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
         tools_version: 1,
         tf_version: 1,
         tf_switch: None,
+        layer_files: vec![None; scene.layers.len()],
+        layer_version: 0,
     };
     for frame in 0..frames {
         let mut state = FrameState {
@@ -242,6 +254,9 @@ struct Sent {
     tools_version: u64,
     tf_version: u64,
     tf_switch: Option<usize>,
+    /// The layers' function files in force (`None`: the scene's).
+    layer_files: Vec<Option<std::path::PathBuf>>,
+    layer_version: u64,
 }
 
 impl Sent {
@@ -295,6 +310,29 @@ impl Sent {
                 })?;
                 state.tf_version = self.tf_version;
             }
+        }
+        // So are the layers' functions.
+        let files = sc.layer_functions(frame, scene.layers.len());
+        if files != self.layer_files {
+            let tfs = files
+                .iter()
+                .zip(&scene.layers)
+                .enumerate()
+                .map(|(i, (f, l))| {
+                    f.as_ref()
+                        .map(|p| {
+                            l.load_function_from(p)
+                                .with_context(|| format!("layer_functions: layer {i}"))
+                        })
+                        .transpose()
+                })
+                .collect::<Result<Vec<_>>>()?;
+            self.layer_files = files;
+            self.layer_version += 1;
+            transport.broadcast(&ToBackend::LayerFunctions {
+                version: self.layer_version,
+                tfs,
+            })?;
         }
         Ok(())
     }

@@ -113,6 +113,20 @@ pub struct Key {
     /// `visible` and `opacity`, in `[[layer]]` order.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub layers: Option<Vec<parallax_common::protocol::LayerControl>>,
+    /// Layers' functions from this frame on: `{ index, file }`, the file a
+    /// transfer function, or a label layer's colour table (relative to the
+    /// script).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub layer_functions: Vec<LayerFunctionKey>,
+}
+
+/// A layer's function switched by a script key.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LayerFunctionKey {
+    /// The layer's place among the scene's `[[layer]]`s.
+    pub index: usize,
+    pub file: PathBuf,
 }
 
 /// A tool set as a script writes it.
@@ -213,6 +227,8 @@ pub struct Script {
     layers: Vec<(u64, Vec<parallax_common::protocol::LayerControl>)>,
     /// (first frame, file) of each transfer function switch.
     tfs: Vec<(u64, PathBuf)>,
+    /// (first frame, layer, file) of each layer function switch.
+    layer_tfs: Vec<(u64, usize, PathBuf)>,
     /// Per tool index of the scene (or of the tool set in force).
     tools: Vec<ToolTracks>,
     /// (first frame, tools) of each tool set switch.
@@ -254,6 +270,7 @@ impl Script {
             overlay: Vec::new(),
             layers: Vec::new(),
             tfs: Vec::new(),
+            layer_tfs: Vec::new(),
             tools: Vec::new(),
             tool_sets: Vec::new(),
             name: name.to_string(),
@@ -365,13 +382,25 @@ impl Script {
                     track.keys.push((k.frame, v));
                 }
             }
-            if let Some(t) = &k.transfer_function {
-                let p = if t.is_absolute() {
+            let beside = |t: &PathBuf| {
+                if t.is_absolute() {
                     t.clone()
                 } else {
                     path.parent().unwrap_or(Path::new(".")).join(t)
-                };
-                s.tfs.push((k.frame, p));
+                }
+            };
+            if let Some(t) = &k.transfer_function {
+                s.tfs.push((k.frame, beside(t)));
+            }
+            for l in &k.layer_functions {
+                if l.index >= parallax_common::config::MAX_LAYERS {
+                    bail!(
+                        "{at}: layer_functions: index {} (a scene has at most {} layers)",
+                        l.index,
+                        parallax_common::config::MAX_LAYERS
+                    );
+                }
+                s.layer_tfs.push((k.frame, l.index, beside(&l.file)));
             }
         }
         s.frames = f.frames.unwrap_or(last.unwrap() + 1);
@@ -395,6 +424,26 @@ impl Script {
             .rev()
             .find(|(f, _)| *f <= frame)
             .map_or(scene, |(_, on)| *on)
+    }
+
+    /// The layers' function files at `frame` (`None`: the scene's), for
+    /// `count` layers.
+    pub fn layer_functions(&self, frame: u64, count: usize) -> Vec<Option<PathBuf>> {
+        let mut out = vec![None; count];
+        for (f, i, p) in &self.layer_tfs {
+            if *f <= frame {
+                if let Some(o) = out.get_mut(*i) {
+                    *o = Some(p.clone());
+                }
+            }
+        }
+        out
+    }
+
+    /// The layer indices the script's keys name, for checking against a
+    /// scene.
+    pub fn layer_indices(&self) -> impl Iterator<Item = usize> + '_ {
+        self.layer_tfs.iter().map(|(_, i, _)| *i)
     }
 
     /// The registered layers' controls at `frame` (empty: the scene's).
@@ -570,6 +619,30 @@ mod tests {
             let e = format!("{:#}", load(text).unwrap_err());
             assert!(e.contains("s.toml") && e.contains(field), "{e}");
         }
+    }
+
+    #[test]
+    fn layer_functions_switch_from_their_frame() {
+        let s = load(
+            "[[key]]\nframe = 0\nlayer_functions = [{ index = 1, file = \"a.toml\" }]\n\
+             [[key]]\nframe = 10\nlayer_functions = [{ index = 0, file = \"/b.txt\" }, { index = 1, file = \"c.toml\" }]\n",
+        )
+        .unwrap();
+        let at = |f| s.layer_functions(f, 2);
+        assert_eq!(at(0)[0], None);
+        assert!(at(9)[1].as_ref().unwrap().ends_with("a.toml"));
+        assert_eq!(at(10)[0].as_deref(), Some(Path::new("/b.txt")));
+        assert!(at(10)[1].as_ref().unwrap().ends_with("c.toml"));
+        assert_eq!(s.layer_indices().max(), Some(1));
+        let e = format!(
+            "{:#}",
+            load("[[key]]\nframe = 0\nlayer_functions = [{ index = 3, file = \"a.toml\" }]\n")
+                .unwrap_err()
+        );
+        assert!(
+            e.contains("s.toml") && e.contains("layer_functions: index 3"),
+            "{e}"
+        );
     }
 }
 

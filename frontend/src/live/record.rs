@@ -14,7 +14,7 @@
 //! disk) stops the recording, not the session.
 
 use super::LiveState;
-use crate::script::{Key, PlacementKey, ScriptFile, ToolSet};
+use crate::script::{Key, LayerFunctionKey, PlacementKey, ScriptFile, ToolSet};
 use anyhow::{Context, Result};
 use parallax_common::protocol::FrameState;
 use parallax_common::tf::TransferFunction;
@@ -56,6 +56,8 @@ const QUEUE: usize = 32;
 struct Recorded {
     state: FrameState,
     tf: TransferFunction,
+    /// The layers' transfer functions (`[[layer]]` order).
+    layer_tfs: Vec<TransferFunction>,
     tools: Vec<Tool>,
 }
 
@@ -178,6 +180,7 @@ impl Recorder {
         self.frames.push(Recorded {
             state,
             tf: live.tf.clone(),
+            layer_tfs: live.layer_tfs.clone(),
             tools: live.tools.clone(),
         });
         self.bytes += png.len() as u64;
@@ -257,7 +260,7 @@ fn lowest_priority() {
 
 /// The whole state of a frame as one key (every later value interpolates
 /// from equal keys, or switches between adjacent frames: exact).
-fn key_of(r: &Recorded, tf_file: Option<PathBuf>) -> Key {
+fn key_of(r: &Recorded, tf_file: Option<PathBuf>, layer_functions: Vec<LayerFunctionKey>) -> Key {
     let s = &r.state;
     Key {
         frame: s.frame,
@@ -278,6 +281,7 @@ fn key_of(r: &Recorded, tf_file: Option<PathBuf>) -> Key {
         cursor: s.render.overlay.cursor,
         overlay: Some(s.render.overlay.show),
         layers: (!s.layers.is_empty()).then(|| s.layers.clone()),
+        layer_functions,
     }
 }
 
@@ -295,7 +299,14 @@ fn script_of(frames: &[Recorded], dir: &Path) -> Result<ScriptFile> {
         sa.tools_version = b.state.tools_version;
         sa.stream.clone_from(&b.state.stream);
         sa.pick = b.state.pick;
-        sa == b.state && a.tf == b.tf && a.tools == b.tools
+        sa == b.state && a.tf == b.tf && a.layer_tfs == b.layer_tfs && a.tools == b.tools
+    };
+    let mut write_tf = |tf: &TransferFunction| -> Result<PathBuf> {
+        tfs += 1;
+        let name = format!("tf-{tfs:03}.toml");
+        let text = toml::to_string(tf).context("cannot write a transfer function")?;
+        parallax_common::atomic::write(&dir.join(&name), text.as_bytes())?;
+        Ok(PathBuf::from(name))
     };
     for (i, r) in frames.iter().enumerate() {
         let changed = i == 0 || !same(&frames[i - 1], r);
@@ -303,18 +314,24 @@ fn script_of(frames: &[Recorded], dir: &Path) -> Result<ScriptFile> {
             continue;
         }
         if i > 0 && keys.last().is_some_and(|k| k.frame + 1 < r.state.frame) {
-            keys.push(key_of(&frames[i - 1], None));
+            keys.push(key_of(&frames[i - 1], None, Vec::new()));
         }
         let tf_file = if i == 0 || frames[i - 1].tf != r.tf {
-            tfs += 1;
-            let name = format!("tf-{tfs:03}.toml");
-            let text = toml::to_string(&r.tf).context("cannot write a transfer function")?;
-            parallax_common::atomic::write(&dir.join(&name), text.as_bytes())?;
-            Some(PathBuf::from(name))
+            Some(write_tf(&r.tf)?)
         } else {
             None
         };
-        keys.push(key_of(r, tf_file));
+        // Each layer's function where the page changed it.
+        let mut layer_functions = Vec::new();
+        for (index, tf) in r.layer_tfs.iter().enumerate() {
+            if i == 0 || frames[i - 1].layer_tfs.get(index) != Some(tf) {
+                layer_functions.push(LayerFunctionKey {
+                    index,
+                    file: write_tf(tf)?,
+                });
+            }
+        }
+        keys.push(key_of(r, tf_file, layer_functions));
     }
     Ok(ScriptFile {
         frames: Some(frames.len() as u64),
