@@ -968,7 +968,7 @@ mod tests {
                 "[[layer]]\nvolume = \"l.pxo\"\n".to_string(),
                 "layer[0]: give either transfer_function",
             ),
-            (labels.replace("labels.txt", "tf.toml"), "layer[0].labels"),
+            (labels.replace("labels.txt", "none.txt"), "layer[0].labels"),
             (layer.repeat(4), "layer: 4 layers"),
             (
                 layer.replace("\"tf.toml", "\"none.toml"),
