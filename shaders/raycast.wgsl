@@ -373,6 +373,7 @@ fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f
     } else {
         avg = segment_average(0u, frame.counts.w, s_prev, s);
     }
+    let vol_tau = select(0.0, avg.x, (ls.mask & 1u) != 0u);
     if (LAYERS > 0u) {
         // The summed medium of the volume and its registered layers.
         avg = layered_average(avg, ls, layer_w);
@@ -406,6 +407,9 @@ fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f
         let aux = segment_average(frame.aux.x, frame.aux.y, s_prev, s);
         smp.importance = aux.x;
         smp.refraction = aux.y;
+        if (LAYERS > 0u && MIMDA) {
+            smp.importance = layered_importance(vol_tau, aux.x, ls);
+        }
     }
     // The gradient (six fetches): for the enhancers where they act, and for
     // shading where the segment has extinction — a transparent segment adds

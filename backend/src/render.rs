@@ -50,6 +50,8 @@ struct ActiveLayer {
     empty: EmptinessTable,
     /// No-data voxels take this value (the layer's smallest).
     fill: f32,
+    /// Its function's largest importance (MImDA's termination).
+    max_importance: f64,
 }
 
 /// The brick caches (the CPU cache in the loader, the GPU pool) and the ray
@@ -203,6 +205,7 @@ fn active_layers(
             preint: PreintTable::new(&tf, lo, hi, bins).with_context(|| field(f, file))?,
             empty,
             fill: s.value_min,
+            max_importance: tf.max_importance(),
             db: Arc::new(ldb),
         });
     }
@@ -390,7 +393,11 @@ impl Renderer {
         let table = PreintTable::new(tf, lo, hi, bins)?;
         let empty = EmptinessTable::new(tf, lo, hi, bins)?;
         let empty_refraction = EmptinessTable::new(&tf.refraction_as_extinction(), lo, hi, bins)?;
-        let layer_tables: Vec<&PreintTable> = self.layers.iter().map(|l| &l.preint).collect();
+        let layer_tables: Vec<(&PreintTable, f64)> = self
+            .layers
+            .iter()
+            .map(|l| (&l.preint, l.max_importance))
+            .collect();
         self.tf = Some(ActiveTf {
             version,
             table: TfTable::with_layers(&self.gpu, &table, tf, &layer_tables),

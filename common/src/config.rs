@@ -229,13 +229,16 @@ fn yes() -> bool {
 
 impl RenderConfig {
     /// What a scene with `[[layer]]`s cannot use yet: the layers are
-    /// combined in the DVR kernel's trilinear, single-level sampling.
+    /// combined in the DVR and MImDA kernels' trilinear, single-level
+    /// sampling.
     pub fn check_layered(&self, file: &str) -> Result<()> {
         let refuse = |field: &str, what: &str| -> Result<()> {
-            bail!("{file}: {field}: {what} is not available with [[layer]]s yet (plain DVR only)")
+            bail!(
+                "{file}: {field}: {what} is not available with [[layer]]s yet (DVR and MImDA only)"
+            )
         };
-        if self.mode != Mode::Dvr {
-            refuse("render.mode", "MImDA and isosurfaces")?;
+        if self.mode == Mode::Iso {
+            refuse("render.mode", "the isosurface mode")?;
         }
         if self.refraction {
             refuse("render.refraction", "refraction")?;
@@ -984,7 +987,7 @@ mod tests {
                 "layer[0].view_opacity.angles_deg",
             ),
             (
-                format!("[render]\nmode = \"mimda\"\ngamma = 0.5\n{layer}"),
+                format!("[render]\nmode = \"iso\"\nisovalue = 0.5\n{layer}"),
                 "render.mode",
             ),
             (

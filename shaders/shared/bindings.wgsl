@@ -135,6 +135,7 @@ struct LayerParams {
     at: vec4<u32>,      // first entry, the bin midpoints' first entry, the running integral's first entry (0: none), pyramid levels
     axis: vec4<f32>,    // view-dependent opacity: its axis (volume space, unit); w: 1 where it has one
     angles: vec4<f32>,  // its angles (radians): from, 1 / (to − from); z: 1 a label layer
+    aux: vec4<u32>,     // its (ι, ν) part: first entry, the running integral's first entry (0: none)
 }
 @group(0) @binding(15) var<uniform> layer_uniform: array<LayerParams, 3>;
 

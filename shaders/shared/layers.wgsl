@@ -25,6 +25,9 @@
 #import preint
 
 var<private> layer_p: array<LayerParams, 3>;
+// Each layer's share of τ̄ in the last segment (`layered_average`), for
+// MImDA's combined importance.
+var<private> layer_tau: vec3<f32>;
 // Whether any layer is a label layer.
 var<private> layer_labels: bool;
 
@@ -72,11 +75,12 @@ fn label_average(p: LayerParams, a: f32, b: f32) -> vec4<f32> {
     return 0.5 * (tf_entry(p.at.x + label_node(p, a)) + tf_entry(p.at.x + label_node(p, b)));
 }
 
-// Bin j's average over [j + ta, j + tb] in layer `p`'s table
-// (`bin_average`'s).
-fn layer_bin_average(p: LayerParams, j: u32, ta: f32, tb: f32) -> vec4<f32> {
-    return quadratic_average(tf_entry(p.at.x + j), tf_entry(p.at.y + j),
-                             tf_entry(p.at.x + j + 1u), ta, tb);
+// Bin j's average over [j + ta, j + tb] in the part of layer `p`'s table
+// at `base` (`bin_average`'s; every part has the layout of its first).
+fn layer_bin_average(p: LayerParams, base: u32, j: u32, ta: f32, tb: f32) -> vec4<f32> {
+    let mid = base + (p.at.y - p.at.x);
+    return quadratic_average(tf_entry(base + j), tf_entry(mid + j),
+                             tf_entry(base + j + 1u), ta, tb);
 }
 
 // Where pyramid level k of a table of n bins starts (common/src/tf/preint.rs
@@ -89,10 +93,16 @@ fn layer_level_offset(n: u32, k: u32) -> u32 {
     return o;
 }
 
-// The average of (τ, k̃) over the data segment [sa, sb] in layer `p`'s table:
+// The average of (τ, k̃) over the data segment [sa, sb] in layer `p`'s table.
+fn layer_average(p: LayerParams, sa: f32, sb: f32) -> vec4<f32> {
+    return layer_part_average(p, p.at.x, p.at.z, sa, sb);
+}
+
+// The average over the data segment [sa, sb] in the part of layer `p`'s
+// table at `base` (its running integral at `prefix`, 0: none):
 // `segment_average`'s sum, whole bins by the running integral where the
 // table has one, else by the dyadic pyramid.
-fn layer_average(p: LayerParams, sa: f32, sb: f32) -> vec4<f32> {
+fn layer_part_average(p: LayerParams, base: u32, prefix: u32, sa: f32, sb: f32) -> vec4<f32> {
     let n = u32(p.table.z);
     var ua = clamp((sa - p.table.x) * p.table.y, 0.0, f32(n));
     var ub = clamp((sb - p.table.x) * p.table.y, 0.0, f32(n));
@@ -103,14 +113,14 @@ fn layer_average(p: LayerParams, sa: f32, sb: f32) -> vec4<f32> {
     }
     let ja = min(u32(ua), n - 1u);
     if (ub <= f32(ja + 1u)) {
-        return layer_bin_average(p, ja, ua - f32(ja), min(ub - f32(ja), 1.0));
+        return layer_bin_average(p, base, ja, ua - f32(ja), min(ub - f32(ja), 1.0));
     }
     let jb = min(u32(ub), n);
-    var sum = (f32(ja + 1u) - ua) * layer_bin_average(p, ja, ua - f32(ja), 1.0);
+    var sum = (f32(ja + 1u) - ua) * layer_bin_average(p, base, ja, ua - f32(ja), 1.0);
     var lo = ja + 1u;
-    if (p.at.z != 0u) {
-        let a = p.at.z + 2u * lo;
-        let b = p.at.z + 2u * jb;
+    if (prefix != 0u) {
+        let a = prefix + 2u * lo;
+        let b = prefix + 2u * jb;
         sum = sum + (tf_entry(b) - tf_entry(a)) + (tf_entry(b + 1u) - tf_entry(a + 1u));
         lo = jb;
     }
@@ -123,11 +133,11 @@ fn layer_average(p: LayerParams, sa: f32, sb: f32) -> vec4<f32> {
         while ((1u << k) > jb - lo) {
             k = k - 1u;
         }
-        sum = sum + tf_entry(p.at.x + layer_level_offset(n, k) + (lo >> k));
+        sum = sum + tf_entry(base + layer_level_offset(n, k) + (lo >> k));
         lo = lo + (1u << k);
     }
     if (jb < n) {
-        sum = sum + (ub - f32(jb)) * layer_bin_average(p, jb, 0.0, ub - f32(jb));
+        sum = sum + (ub - f32(jb)) * layer_bin_average(p, base, jb, 0.0, ub - f32(jb));
     }
     return sum / (ub - ua);
 }
@@ -194,14 +204,49 @@ fn layer_term(k: u32, a: f32, b: f32, ea: TfEnd, eb: TfEnd) -> vec4<f32> {
 // and each layer's, weighted by `w` (`layer_weights`), where each has data.
 fn layered_average(vol: vec4<f32>, ls: LayerSeg, w: vec3<f32>) -> vec4<f32> {
     var sum = select(vec4<f32>(0.0), vol, (ls.mask & 1u) != 0u);
+    layer_tau = vec3<f32>(0.0);
     if (LAYERS > 0u && (ls.mask & 2u) != 0u && w.x > 0.0) {
-        sum = sum + w.x * layer_term(0u, ls.a.x, ls.b.x, ls.ea[0], ls.eb[0]);
+        let t = w.x * layer_term(0u, ls.a.x, ls.b.x, ls.ea[0], ls.eb[0]);
+        layer_tau.x = t.x;
+        sum = sum + t;
     }
     if (LAYERS > 1u && (ls.mask & 4u) != 0u && w.y > 0.0) {
-        sum = sum + w.y * layer_term(1u, ls.a.y, ls.b.y, ls.ea[1], ls.eb[1]);
+        let t = w.y * layer_term(1u, ls.a.y, ls.b.y, ls.ea[1], ls.eb[1]);
+        layer_tau.y = t.x;
+        sum = sum + t;
     }
     if (LAYERS > 2u && (ls.mask & 8u) != 0u && w.z > 0.0) {
-        sum = sum + w.z * layer_term(2u, ls.a.z, ls.b.z, ls.ea[2], ls.eb[2]);
+        let t = w.z * layer_term(2u, ls.a.z, ls.b.z, ls.ea[2], ls.eb[2]);
+        layer_tau.z = t.x;
+        sum = sum + t;
     }
     return sum;
+}
+
+// The summed medium's importance over a segment (MImDA, G10 Eq. 3): each
+// medium's average importance there, weighted by its share of the
+// extinction (`vol_tau` the volume's, where it has data; each layer's from
+// `layered_average`), as the emissions are. A layer's importance is its own
+// function's; a label layer's, each end's label's for half the segment.
+fn layered_importance(vol_tau: f32, vol_importance: f32, ls: LayerSeg) -> f32 {
+    var num = vol_tau * vol_importance;
+    var den = vol_tau;
+    for (var k = 0u; k < LAYERS; k = k + 1u) {
+        if (layer_tau[k] > 0.0) {
+            let p = layer_p[k];
+            var imp: f32;
+            if (is_label(k)) {
+                imp = 0.5 * (tf_entry(p.aux.x + label_node(p, ls.a[k])).x
+                             + tf_entry(p.aux.x + label_node(p, ls.b[k])).x);
+            } else {
+                imp = layer_part_average(p, p.aux.x, p.aux.y, ls.a[k], ls.b[k]).x;
+            }
+            num = num + layer_tau[k] * imp;
+            den = den + layer_tau[k];
+        }
+    }
+    if (den > 0.0) {
+        return num / den;
+    }
+    return vol_importance;
 }

@@ -361,6 +361,7 @@ impl Raycaster {
             for (l, t) in layers.iter_mut().zip(&tf.layers) {
                 l.table = [t.table[0], t.table[1], t.table[2], l.table[3]];
                 l.at = t.at;
+                l.aux = t.aux;
             }
             gpu.queue
                 .write_buffer(&self.layers, 0, bytemuck::cast_slice(&layers));

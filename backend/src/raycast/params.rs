@@ -86,6 +86,9 @@ pub struct LayerParams {
     /// Its angles (radians): from, 1 / (to − from); z: 1 for a label layer
     /// (nearest sampling, one bin per label); w: 0.
     pub angles: [f32; 4],
+    /// Its (ι, ν) part of `tf_table` (MImDA): first entry, the running
+    /// integral's first entry (0: none), 0, 0.
+    pub aux: [u32; 4],
 }
 
 /// WGSL `ToolParams`: one tool's constant parameters (meaning per enhancer,

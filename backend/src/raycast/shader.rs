@@ -140,12 +140,15 @@ impl KernelKey {
         let mut out = Self::with_steppers(&chains);
         for layers in 1..=parallax_common::config::MAX_LAYERS as u32 {
             for layer_end in [false, true] {
-                out.extend(chains.iter().map(|e| KernelKey {
-                    enhancers: e.clone(),
-                    layers,
-                    layer_end,
-                    ..Default::default()
-                }));
+                for mimda in [false, true] {
+                    out.extend(chains.iter().map(|e| KernelKey {
+                        enhancers: e.clone(),
+                        layers,
+                        layer_end,
+                        mimda,
+                        ..Default::default()
+                    }));
+                }
             }
         }
         out
@@ -166,17 +169,20 @@ impl KernelKey {
             chains.push(vec![k; MAX_ENHANCERS]);
         }
         let mut out = Self::with_steppers(&chains);
-        // Registered layers, from their tables' ends or not, alone and
-        // under a clip plane and a probe.
+        // Registered layers, from their tables' ends or not, with DVR and
+        // MImDA, alone and under a clip plane and a probe.
         for layers in 1..=parallax_common::config::MAX_LAYERS as u32 {
             for layer_end in [false, true] {
-                for enhancers in [vec![], vec![EnhancerKind::ClipPlane, EnhancerKind::Probe]] {
-                    out.push(KernelKey {
-                        layers,
-                        layer_end,
-                        enhancers,
-                        ..Default::default()
-                    });
+                for mimda in [false, true] {
+                    for enhancers in [vec![], vec![EnhancerKind::ClipPlane, EnhancerKind::Probe]] {
+                        out.push(KernelKey {
+                            layers,
+                            layer_end,
+                            mimda,
+                            enhancers,
+                            ..Default::default()
+                        });
+                    }
                 }
             }
         }
@@ -260,8 +266,8 @@ impl KernelKey {
         if self.iso && (self.mimda || self.refraction) {
             bail!("the isosurface stepper takes neither MImDA nor refraction");
         }
-        if self.layers > 0 && (self.iso || self.mimda || self.refraction) {
-            bail!("registered layers are combined by the DVR stepper only");
+        if self.layers > 0 && (self.iso || self.refraction) {
+            bail!("registered layers are combined by the DVR and MImDA steppers only");
         }
         if self.layers as usize > parallax_common::config::MAX_LAYERS {
             bail!(
@@ -294,6 +300,7 @@ impl KernelKey {
         s.push_str("#import iso\n");
         let _ = writeln!(s, "const ISO: bool = {};", self.iso);
         let _ = writeln!(s, "const LAYERS: u32 = {}u;", self.layers);
+        let _ = writeln!(s, "const MIMDA: bool = {};", self.mimda);
         let _ = writeln!(s, "const LAYER_END: bool = {};", self.layer_end);
         let _ = writeln!(s, "const HAS_BREAKS: bool = {};", any(|e| e.needs.breaks));
         let _ = writeln!(
@@ -466,11 +473,12 @@ mod tests {
         // (DVR/MImDA × refraction off/on, and the isosurface) × (no
         // enhancer, each kind alone, each kind three times), every ordered
         // pair under DVR and those of all but two under MImDA with
-        // refraction.
+        // refraction; and 1–3 layers (from their ends or not, DVR or MImDA,
+        // alone or under a clip plane and a probe).
         assert_eq!(
             keys.len(),
             (2 * 2 + 1) * (1 + 2 * kinds)
-                + 4 * parallax_common::config::MAX_LAYERS
+                + 8 * parallax_common::config::MAX_LAYERS
                 + kinds * kinds
                 + (kinds - 2) * (kinds - 2)
         );
@@ -658,7 +666,7 @@ mod tests {
         );
         check!("IndexNode", IndexNode, [tree, data, range, nx, ny, nz]);
         check!("ToolParams", ToolParams, [a, b, c, d]);
-        check!("LayerParams", LayerParams, [table, at, axis, angles]);
+        check!("LayerParams", LayerParams, [table, at, axis, angles, aux]);
         // The closed form's uniform: its header and MAX_PIECES pieces.
         let (span, _) = layout("TfPieces");
         assert_eq!(

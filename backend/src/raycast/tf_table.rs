@@ -124,9 +124,13 @@ impl TfTable {
         gpu: &Gpu,
         table: &PreintTable,
         tf: &TransferFunction,
-        layers: &[&PreintTable],
+        layers: &[(&PreintTable, f64)],
     ) -> Self {
-        let max_importance = tf.max_importance();
+        // MImDA's termination needs the largest importance of every medium.
+        let max_importance = layers
+            .iter()
+            .map(|l| l.1)
+            .fold(tf.max_importance(), f64::max);
         let (planar, layout) = table.gpu_layout();
         // Two interleaved parts with the same layout: (τ, k̃r, k̃g, k̃b), what
         // DVR reads, one 16-byte load per table entry; then (ι, ν, 0, 0),
@@ -159,7 +163,7 @@ impl TfTable {
         );
         let mut layer_params = Vec::with_capacity(layers.len());
         let mut layers_end = true;
-        for t in layers {
+        for &(t, _) in layers {
             let (planar, layout) = t.gpu_layout();
             let base = data.len() as u32;
             let prefix = Self::push_part(
@@ -175,6 +179,20 @@ impl TfTable {
                 ],
             );
             layers_end &= prefix != 0 && dvr_within_end_range(t);
+            // Its (ι, ν) part, for MImDA's combined importance.
+            let aux = data.len() as u32;
+            let aux_prefix = Self::push_part(
+                &mut data,
+                &planar,
+                &layout,
+                t,
+                [
+                    Some(Channel::Importance),
+                    Some(Channel::Refraction),
+                    None,
+                    None,
+                ],
+            );
             layer_params.push(super::params::LayerParams {
                 table: [
                     layout.vmin as f32,
@@ -183,6 +201,7 @@ impl TfTable {
                     0.0,
                 ],
                 at: [base, base + layout.mid_offset, prefix, layout.levels],
+                aux: [aux, aux_prefix, 0, 0],
                 ..Default::default()
             });
         }
