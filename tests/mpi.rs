@@ -558,12 +558,29 @@ fn a_clip_plane_band_picker_probe_and_mimda_render_identically_in_the_cluster() 
     }
 }
 
-/// A scene with a registered layer (`[[layer]]`, G10 §4: the volume again
-/// through another transfer function, shown to one side of the wall)
-/// renders under `mpirun -n 3` as embedded, and the layer shows.
+/// A scene with registered layers (`[[layer]]`, G10 §4: the volume again
+/// through another transfer function, shown to one side of the wall, and
+/// a label layer made of it by thresholds, with a 3D Slicer colour table)
+/// renders under `mpirun -n 3` as embedded, and the layers show.
 #[test]
 fn a_two_layer_scene_renders_identically_in_the_cluster() {
     let w = World::new();
+    let o = run(&[
+        "import",
+        s(&w.path("v.nrrd")),
+        "-o",
+        s(&w.path("labels.pxo")),
+        "--brick",
+        "16",
+        "--labels-from-thresholds",
+        "120,220",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    std::fs::write(
+        w.path("labels.ctbl"),
+        "# Color table file\n0 none 0 0 0 0\n1 middle 40 200 90 60\n2 core 250 240 40 255\n",
+    )
+    .unwrap();
     std::fs::write(
         w.path("tf-layer.toml"),
         "[[point]]\nvalue = 150\ncolor = [1, 0.2, 0.1]\nextinction = 0\n\
@@ -575,7 +592,8 @@ fn a_two_layer_scene_renders_identically_in_the_cluster() {
         &scene,
         std::fs::read_to_string(w.path("scene.toml")).unwrap()
             + "[[layer]]\nvolume = \"v.pxo\"\ntransfer_function = \"tf-layer.toml\"\n\
-               view_opacity = { axis = [1, 0, -1], angles_deg = [20, 60] }\n",
+               view_opacity = { axis = [1, 0, -1], angles_deg = [20, 60] }\n\
+               [[layer]]\nvolume = \"labels.pxo\"\nlabels = \"labels.ctbl\"\nopacity = 0.5\n",
     )
     .unwrap();
     let cluster = w.path("layers-cluster");

@@ -615,6 +615,12 @@ impl Renderer {
                 enhancers: acting.iter().map(|t| t.enhancer()).collect(),
                 layers: self.layers.len() as u32,
                 layer_end: self.tf.as_ref().is_some_and(|t| t.table.layers_end_path()),
+                labels: self
+                    .layers
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, l)| l.spec.is_labels())
+                    .fold(0, |m, (k, _)| m | 1 << k),
             },
             gamma: if cfg.mode == Mode::Mimda {
                 cfg.gamma as f32
@@ -675,8 +681,6 @@ impl Renderer {
                 p.axis = [a.x as f32, a.y as f32, a.z as f32, 1.0];
                 p.angles = [from as f32, inv, 0.0, 0.0];
             }
-            // A label layer: nearest sampling, each label's own optics.
-            p.angles[2] = if l.spec.is_labels() { 1.0 } else { 0.0 };
         }
         out
     }

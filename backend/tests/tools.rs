@@ -792,6 +792,12 @@ fn every_shipped_scene_loads() {
             enhancers: s.tools.iter().map(Tool::enhancer).collect(),
             layers: s.layers.len() as u32,
             layer_end: !s.layers.is_empty(),
+            labels: s
+                .layers
+                .iter()
+                .enumerate()
+                .filter(|(_, l)| l.is_labels())
+                .fold(0, |m, (k, _)| m | 1 << k),
         };
         assert!(all.contains(&key), "{}: {key:?}", p.display());
         n += 1;

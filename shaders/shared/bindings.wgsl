@@ -134,7 +134,7 @@ struct LayerParams {
     table: vec4<f32>,   // vmin, 1 / bin width, bins, opacity
     at: vec4<u32>,      // first entry, the bin midpoints' first entry, the running integral's first entry (0: none), pyramid levels
     axis: vec4<f32>,    // view-dependent opacity: its axis (volume space, unit); w: 1 where it has one
-    angles: vec4<f32>,  // its angles (radians): from, 1 / (to − from); z: 1 a label layer
+    angles: vec4<f32>,  // its angles (radians): from, 1 / (to − from), 0, 0
     aux: vec4<u32>,     // its (ι, ν) part: first entry, the running integral's first entry (0: none)
 }
 @group(0) @binding(15) var<uniform> layer_uniform: array<LayerParams, 3>;

@@ -15,7 +15,9 @@
 // function of the view direction"). LAYERS (the chain module) is their
 // count; without layers none of this is compiled in.
 //
-// A label layer (a segmentation and its colour table, `angles.z` = 1) is
+// A label layer (a segmentation and its colour table; LABELS, a constant of
+// the chain module, has bit k set where layer k is one: without label
+// layers none of their code is compiled in) is
 // read at the nearest voxel, whole labels, never interpolated into another
 // label; its table has a node at each label, holding the label's optics,
 // and a segment between two labels takes each end's for half its length
@@ -28,22 +30,16 @@ var<private> layer_p: array<LayerParams, 3>;
 // Each layer's share of τ̄ in the last segment (`layered_average`), for
 // MImDA's combined importance.
 var<private> layer_tau: vec3<f32>;
-// Whether any layer is a label layer.
-var<private> layer_labels: bool;
 
 // The layers' constants, copied once per ray like the frame's.
 fn load_layers() {
     if (LAYERS > 0u) {
         layer_p = layer_uniform;
-        layer_labels = false;
-        for (var k = 0u; k < LAYERS; k = k + 1u) {
-            layer_labels = layer_labels || is_label(k);
-        }
     }
 }
 
 fn is_label(k: u32) -> bool {
-    return layer_p[k].angles.z > 0.5;
+    return (LABELS & (1u << k)) != 0u;
 }
 
 // The layers' values at p from the layered pool's texel `v` there and the
@@ -51,7 +47,7 @@ fn is_label(k: u32) -> bool {
 // nearest voxel's label.
 fn layer_values(leaf: Leaf, p: vec3<f32>, v: vec4<f32>, lo: vec3<f32>, span: vec3<f32>) -> vec3<f32> {
     var lay = lo + span * v.yzw;
-    if (layer_labels) {
+    if (LABELS != 0u) {
         let near = lo + span * sample_nearest(leaf, p).yzw;
         for (var k = 0u; k < LAYERS; k = k + 1u) {
             if (is_label(k)) {
@@ -191,7 +187,7 @@ struct LayerSeg {
 
 // Layer k's averages over the segment, from the ends or from the table.
 fn layer_term(k: u32, a: f32, b: f32, ea: TfEnd, eb: TfEnd) -> vec4<f32> {
-    if (layer_labels && is_label(k)) {
+    if (is_label(k)) {
         return label_average(layer_p[k], a, b);
     }
     if (LAYER_END) {
@@ -204,20 +200,28 @@ fn layer_term(k: u32, a: f32, b: f32, ea: TfEnd, eb: TfEnd) -> vec4<f32> {
 // and each layer's, weighted by `w` (`layer_weights`), where each has data.
 fn layered_average(vol: vec4<f32>, ls: LayerSeg, w: vec3<f32>) -> vec4<f32> {
     var sum = select(vec4<f32>(0.0), vol, (ls.mask & 1u) != 0u);
-    layer_tau = vec3<f32>(0.0);
+    if (MIMDA) {
+        layer_tau = vec3<f32>(0.0);
+    }
     if (LAYERS > 0u && (ls.mask & 2u) != 0u && w.x > 0.0) {
         let t = w.x * layer_term(0u, ls.a.x, ls.b.x, ls.ea[0], ls.eb[0]);
-        layer_tau.x = t.x;
+        if (MIMDA) {
+            layer_tau.x = t.x;
+        }
         sum = sum + t;
     }
     if (LAYERS > 1u && (ls.mask & 4u) != 0u && w.y > 0.0) {
         let t = w.y * layer_term(1u, ls.a.y, ls.b.y, ls.ea[1], ls.eb[1]);
-        layer_tau.y = t.x;
+        if (MIMDA) {
+            layer_tau.y = t.x;
+        }
         sum = sum + t;
     }
     if (LAYERS > 2u && (ls.mask & 8u) != 0u && w.z > 0.0) {
         let t = w.z * layer_term(2u, ls.a.z, ls.b.z, ls.ea[2], ls.eb[2]);
-        layer_tau.z = t.x;
+        if (MIMDA) {
+            layer_tau.z = t.x;
+        }
         sum = sum + t;
     }
     return sum;

@@ -83,8 +83,7 @@ pub struct LayerParams {
     /// The view-dependent opacity's axis (volume space, unit); w: 1 where
     /// the layer has one.
     pub axis: [f32; 4],
-    /// Its angles (radians): from, 1 / (to − from); z: 1 for a label layer
-    /// (nearest sampling, one bin per label); w: 0.
+    /// Its angles (radians): from, 1 / (to − from), 0, 0.
     pub angles: [f32; 4],
     /// Its (ι, ν) part of `tf_table` (MImDA): first entry, the running
     /// integral's first entry (0: none), 0, 0.

@@ -116,6 +116,9 @@ pub struct KernelKey {
     /// Every layer's table allows pre-integrating from the segments' ends
     /// (`TfTable::layers_end_path`): five reads a sample and layer.
     pub layer_end: bool,
+    /// Which layers are label layers (bit k: layer k), read at the nearest
+    /// voxel with each label's own optics; 0 compiles none of that in.
+    pub labels: u32,
 }
 
 impl KernelKey {
@@ -141,13 +144,16 @@ impl KernelKey {
         for layers in 1..=parallax_common::config::MAX_LAYERS as u32 {
             for layer_end in [false, true] {
                 for mimda in [false, true] {
-                    out.extend(chains.iter().map(|e| KernelKey {
-                        enhancers: e.clone(),
-                        layers,
-                        layer_end,
-                        mimda,
-                        ..Default::default()
-                    }));
+                    for labels in 0..1u32 << layers {
+                        out.extend(chains.iter().map(|e| KernelKey {
+                            enhancers: e.clone(),
+                            layers,
+                            layer_end,
+                            mimda,
+                            labels,
+                            ..Default::default()
+                        }));
+                    }
                 }
             }
         }
@@ -170,7 +176,18 @@ impl KernelKey {
         }
         let mut out = Self::with_steppers(&chains);
         // Registered layers, from their tables' ends or not, with DVR and
-        // MImDA, alone and under a clip plane and a probe.
+        // MImDA, alone and under a clip plane and a probe; and label
+        // layers among them.
+        for layers in 1..=parallax_common::config::MAX_LAYERS as u32 {
+            for mimda in [false, true] {
+                out.push(KernelKey {
+                    layers,
+                    labels: 1 << (layers - 1),
+                    mimda,
+                    ..Default::default()
+                });
+            }
+        }
         for layers in 1..=parallax_common::config::MAX_LAYERS as u32 {
             for layer_end in [false, true] {
                 for mimda in [false, true] {
@@ -302,6 +319,7 @@ impl KernelKey {
         let _ = writeln!(s, "const LAYERS: u32 = {}u;", self.layers);
         let _ = writeln!(s, "const MIMDA: bool = {};", self.mimda);
         let _ = writeln!(s, "const LAYER_END: bool = {};", self.layer_end);
+        let _ = writeln!(s, "const LABELS: u32 = {}u;", self.labels);
         let _ = writeln!(s, "const HAS_BREAKS: bool = {};", any(|e| e.needs.breaks));
         let _ = writeln!(
             s,
@@ -474,11 +492,12 @@ mod tests {
         // enhancer, each kind alone, each kind three times), every ordered
         // pair under DVR and those of all but two under MImDA with
         // refraction; and 1–3 layers (from their ends or not, DVR or MImDA,
-        // alone or under a clip plane and a probe).
+        // alone or under a clip plane and a probe; the last a label layer,
+        // DVR or MImDA).
         assert_eq!(
             keys.len(),
             (2 * 2 + 1) * (1 + 2 * kinds)
-                + 8 * parallax_common::config::MAX_LAYERS
+                + 10 * parallax_common::config::MAX_LAYERS
                 + kinds * kinds
                 + (kinds - 2) * (kinds - 2)
         );
