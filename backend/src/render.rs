@@ -15,7 +15,7 @@ use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Filter, Interpolation, Layer, Mode, RenderConfig, Shading};
 use parallax_common::protocol::FrameStats;
-use parallax_common::tf::labels::{self, LabelTable};
+use parallax_common::tf::labels;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::tools::{PackContext, Tool, MAX_ENHANCERS};
 use std::collections::VecDeque;
@@ -157,20 +157,25 @@ fn active_layers(
             );
         }
         let (f, file) = spec.function_file();
+        let s = &ldb.summary;
         let tf = match tfs.get(i) {
             Some(Some(tf)) => tf.clone(),
-            _ => spec.load_function().with_context(|| field(f, file))?,
+            _ => {
+                let tf = spec.load_function().with_context(|| field(f, file))?;
+                // The scene's colour table lists every label the volume holds.
+                if let (true, Some(present)) = (spec.is_labels(), &s.labels) {
+                    labels::check_labels(&tf, present).with_context(|| {
+                        format!("{}: {}", field(f, file), spec.volume.display())
+                    })?;
+                }
+                tf
+            }
         };
-        let s = &ldb.summary;
         // The table's range and bins, and the emptiness table.
         let (lo, hi, bins, empty) = match (&spec.labels, &s.labels) {
             // A node at each label, where the kernel reads its optics; the
             // labels' steps tell which bricks draw nothing.
-            (Some(table), Some(labels)) => {
-                let t = LabelTable::load(table).with_context(|| field(f, file))?;
-                t.check(labels).with_context(|| {
-                    format!("{}: {}", field(f, file), spec.volume.display())
-                })?;
+            (Some(_), Some(labels)) => {
                 let (a, b) = (labels[0], labels[labels.len() - 1]);
                 let n = (b - a) as usize + 1;
                 let steps = labels::label_steps(&tf, a, b);

@@ -111,6 +111,15 @@ fn dvr_within_end_range(table: &PreintTable) -> bool {
     })
 }
 
+/// Where a table's parts went in the table texture (`push_parts`).
+struct Parts {
+    layout: PreintLayout,
+    base: u32,
+    prefix: u32,
+    aux: u32,
+    aux_prefix: u32,
+}
+
 impl TfTable {
     /// The tables of `tf`, `table` its pre-integration table.
     pub fn new(gpu: &Gpu, table: &PreintTable, tf: &TransferFunction) -> Self {
@@ -131,77 +140,29 @@ impl TfTable {
             .iter()
             .map(|l| l.1)
             .fold(tf.max_importance(), f64::max);
-        let (planar, layout) = table.gpu_layout();
         // Two interleaved parts with the same layout: (τ, k̃r, k̃g, k̃b), what
         // DVR reads, one 16-byte load per table entry; then (ι, ν, 0, 0),
-        // read only by the MImDA and refraction kernels.
+        // read only by the MImDA and refraction kernels. The same for each
+        // layer after the volume's.
         let mut data = Vec::new();
-        let prefix_offset = Self::push_part(
-            &mut data,
-            &planar,
-            &layout,
-            table,
-            [
-                Some(Channel::Tau),
-                Some(Channel::EmissionR),
-                Some(Channel::EmissionG),
-                Some(Channel::EmissionB),
-            ],
-        );
-        let aux_base = data.len() as u32;
-        let aux_prefix = Self::push_part(
-            &mut data,
-            &planar,
-            &layout,
-            table,
-            [
-                Some(Channel::Importance),
-                Some(Channel::Refraction),
-                None,
-                None,
-            ],
-        );
+        let vol = Self::push_parts(&mut data, table);
+        let (layout, prefix_offset, aux_base, aux_prefix) =
+            (vol.layout, vol.prefix, vol.aux, vol.aux_prefix);
         let mut layer_params = Vec::with_capacity(layers.len());
         let mut layers_end = true;
         for &(t, _) in layers {
-            let (planar, layout) = t.gpu_layout();
-            let base = data.len() as u32;
-            let prefix = Self::push_part(
-                &mut data,
-                &planar,
-                &layout,
-                t,
-                [
-                    Some(Channel::Tau),
-                    Some(Channel::EmissionR),
-                    Some(Channel::EmissionG),
-                    Some(Channel::EmissionB),
-                ],
-            );
-            layers_end &= prefix != 0 && dvr_within_end_range(t);
-            // Its (ι, ν) part, for MImDA's combined importance.
-            let aux = data.len() as u32;
-            let aux_prefix = Self::push_part(
-                &mut data,
-                &planar,
-                &layout,
-                t,
-                [
-                    Some(Channel::Importance),
-                    Some(Channel::Refraction),
-                    None,
-                    None,
-                ],
-            );
+            let p = Self::push_parts(&mut data, t);
+            let l = p.layout;
+            layers_end &= p.prefix != 0 && dvr_within_end_range(t);
             layer_params.push(super::params::LayerParams {
                 table: [
-                    layout.vmin as f32,
-                    (1.0 / layout.bin_width) as f32,
-                    layout.n_bins as f32,
+                    l.vmin as f32,
+                    (1.0 / l.bin_width) as f32,
+                    l.n_bins as f32,
                     0.0,
                 ],
-                at: [base, base + layout.mid_offset, prefix, layout.levels],
-                aux: [aux, aux_prefix, 0, 0],
+                at: [p.base, p.base + l.mid_offset, p.prefix, l.levels],
+                aux: [p.aux, p.aux_prefix, 0, 0],
                 ..Default::default()
             });
         }
@@ -235,6 +196,35 @@ impl TfTable {
             id: next_resource_id(),
             layers: layer_params,
             layers_end,
+        }
+    }
+
+    /// Appends a table's two parts, (τ, k̃) then (ι, ν): where each starts
+    /// and its running integral (0: none).
+    fn push_parts(data: &mut Vec<[f32; 4]>, table: &PreintTable) -> Parts {
+        let (planar, layout) = table.gpu_layout();
+        let base = data.len() as u32;
+        let dvr = [
+            Some(Channel::Tau),
+            Some(Channel::EmissionR),
+            Some(Channel::EmissionG),
+            Some(Channel::EmissionB),
+        ];
+        let prefix = Self::push_part(data, &planar, &layout, table, dvr);
+        let aux = data.len() as u32;
+        let aux_channels = [
+            Some(Channel::Importance),
+            Some(Channel::Refraction),
+            None,
+            None,
+        ];
+        let aux_prefix = Self::push_part(data, &planar, &layout, table, aux_channels);
+        Parts {
+            layout,
+            base,
+            prefix,
+            aux,
+            aux_prefix,
         }
     }
 

@@ -157,27 +157,6 @@ impl LabelTable {
             .map(|i| &self.labels[i])
     }
 
-    /// Checks that every label a volume holds (`present`) has an entry:
-    /// an unknown label is an error naming it, never a colour.
-    pub fn check(&self, present: &[u32]) -> Result<()> {
-        let missing: Vec<u32> = present
-            .iter()
-            .copied()
-            .filter(|&v| self.get(v).is_none())
-            .collect();
-        if let Some(first) = missing.first() {
-            bail!(
-                "the volume holds label {first}{}, which the colour table does not list (it lists {})",
-                match missing.len() {
-                    1 => String::new(),
-                    n => format!(" and {} more unknown labels", n - 1),
-                },
-                self.labels.len()
-            );
-        }
-        Ok(())
-    }
-
     /// The table as a transfer function: a point at each label with its
     /// colour and extinction (what lies between labels is never drawn).
     pub fn transfer_function(&self) -> TransferFunction {
@@ -189,6 +168,29 @@ impl LabelTable {
         TransferFunction::from_points(points)
             .expect("a label table's points are a valid transfer function")
     }
+}
+
+/// Checks that a label layer's function `tf` (a colour table's, with a
+/// point at each label it lists) lists every label a volume holds
+/// (`present`): an unknown label is an error naming it, never a colour.
+pub fn check_labels(tf: &TransferFunction, present: &[u32]) -> Result<()> {
+    let listed = |v: u32| {
+        tf.points()
+            .binary_search_by(|p| p.value.total_cmp(&(v as f64)))
+            .is_ok()
+    };
+    let missing: Vec<u32> = present.iter().copied().filter(|&v| !listed(v)).collect();
+    if let Some(first) = missing.first() {
+        bail!(
+            "the volume holds label {first}{}, which the colour table does not list (it lists {})",
+            match missing.len() {
+                1 => String::new(),
+                n => format!(" and {} more unknown labels", n - 1),
+            },
+            tf.points().len()
+        );
+    }
+    Ok(())
 }
 
 /// A label layer's function `tf` as steps over the labels `lo..=hi`: each
@@ -369,8 +371,11 @@ mod tests {
         assert_eq!(LabelTable::detect(toml), LabelFormat::Toml);
         let t = LabelTable::parse(toml, "t.toml").unwrap();
         assert_eq!(t.get(4).unwrap().extinction, 2.5);
-        assert!(t.check(&[4]).is_ok());
-        let e = format!("{:#}", t.check(&[0, 4, 9]).unwrap_err());
+        assert!(check_labels(&t.transfer_function(), &[4]).is_ok());
+        let e = format!(
+            "{:#}",
+            check_labels(&t.transfer_function(), &[0, 4, 9]).unwrap_err()
+        );
         assert!(e.contains("label 0") && e.contains("1 more"), "{e}");
         for (text, want) in [
             ("0 a 0 0 0\n", "s.ctbl: line 1: 4 numbers"),
