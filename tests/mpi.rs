@@ -560,8 +560,10 @@ fn a_clip_plane_band_picker_probe_and_mimda_render_identically_in_the_cluster() 
 
 /// A scene with registered layers (`[[layer]]`, G10 §4: the volume again
 /// through another transfer function, shown to one side of the wall, and
-/// a label layer made of it by thresholds, with a 3D Slicer colour table)
-/// renders under `mpirun -n 3` as embedded, and the layers show.
+/// a label layer made of it by thresholds, with a 3D Slicer colour table,
+/// on another grid (bricks of 8 against the volume's 16) and moved 1.5
+/// voxels along x by its transform) renders under `mpirun -n 3` as
+/// embedded, and the layers show.
 #[test]
 fn a_two_layer_scene_renders_identically_in_the_cluster() {
     let w = World::new();
@@ -571,7 +573,7 @@ fn a_two_layer_scene_renders_identically_in_the_cluster() {
         "-o",
         s(&w.path("labels.pxo")),
         "--brick",
-        "16",
+        "8",
         "--labels-from-thresholds",
         "120,220",
     ]);
@@ -593,7 +595,8 @@ fn a_two_layer_scene_renders_identically_in_the_cluster() {
         std::fs::read_to_string(w.path("scene.toml")).unwrap()
             + "[[layer]]\nvolume = \"v.pxo\"\ntransfer_function = \"tf-layer.toml\"\n\
                view_opacity = { axis = [1, 0, -1], angles_deg = [20, 60] }\n\
-               [[layer]]\nvolume = \"labels.pxo\"\nlabels = \"labels.ctbl\"\nopacity = 0.5\n",
+               [[layer]]\nvolume = \"labels.pxo\"\nlabels = \"labels.ctbl\"\nopacity = 0.5\n\
+               transform = [[1, 0, 0, 1.5], [0, 1, 0, 0], [0, 0, 1, 0]]\n",
     )
     .unwrap();
     let cluster = w.path("layers-cluster");

@@ -4,7 +4,7 @@
 
 use crate::gpu::Gpu;
 use crate::index::SpatialIndex;
-use crate::loader::{Loader, LoaderConfig};
+use crate::loader::{Affine, LayerSource, Loader, LoaderConfig};
 use crate::raycast::{
     BrickPool, Filtering, KernelKey, Multilevel, Raycaster, RenderInputs, RenderSettings,
     SceneGeometry, TfTable, ToolParams,
@@ -52,6 +52,25 @@ struct ActiveLayer {
     fill: f32,
     /// Its function's largest importance (MImDA's termination).
     max_importance: f64,
+    /// Layer space → the volume's, for a layer on another grid.
+    transform: Option<Affine>,
+}
+
+/// Layer `i`'s `transform`, checked: invertible, and placing some of the
+/// layer's box inside the scene volume's.
+fn placement(db: &OctreeDb, ldb: &OctreeDb, a: Affine, i: usize) -> Result<Affine> {
+    if a.inverse().is_none() {
+        bail!("layer[{i}].transform: the linear part is singular");
+    }
+    let ext = |d: &OctreeDb| crate::volume::extent(d.layout().dims, d.header.info.spacing);
+    let (lo, hi) = a.map_box([0.0; 3], ext(ldb));
+    let v = ext(db);
+    if (0..3).any(|k| hi[k] <= 0.0 || lo[k] >= v[k]) {
+        bail!(
+            "layer[{i}].transform: places the layer's box at {lo:.1?} … {hi:.1?}, outside the scene volume's [0, 0, 0] … {v:.1?} (volume space, data units from the first voxel's corner)"
+        );
+    }
+    Ok(a)
 }
 
 /// The brick caches (the CPU cache in the loader, the GPU pool) and the ray
@@ -67,9 +86,12 @@ fn caches(
     let channels = BrickPool::channels_for(layers.len());
     // 8-bit codes where every medium's database holds them (filtered by
     // the texture unit), else f32.
+    // A layer resampled onto the volume's bricks is kept in f32 (its
+    // values are no longer the 8-bit codes of its database).
     let float = std::iter::once(&**db)
         .chain(layers.iter().map(|l| &*l.db))
-        .any(|d| d.encoding() != BrickEncoding::U8Range);
+        .any(|d| d.encoding() != BrickEncoding::U8Range)
+        || layers.iter().any(|l| l.transform.is_some());
     let filtering = match cfg.interpolation {
         Interpolation::Hardware => Filtering::Hardware,
         Interpolation::Exact => Filtering::Exact,
@@ -106,7 +128,12 @@ fn caches(
     let pool = BrickPool::with_channels(gpu, slots, side, float, channels)?;
     let layer_sources = layers
         .iter()
-        .map(|l| (l.db.clone(), l.empty.clone()))
+        .map(|l| LayerSource {
+            db: l.db.clone(),
+            empty: l.empty.clone(),
+            transform: l.transform,
+            nearest: l.spec.is_labels(),
+        })
         .collect();
     let loader = Loader::with_layers(
         db.clone(),
@@ -142,11 +169,17 @@ fn active_layers(
         let ldb = OctreeDb::open(&spec.volume).with_context(|| field("volume", &spec.volume))?;
         let (a, b) = (db.layout(), ldb.layout());
         let (sa, sb) = (db.header.info.spacing, ldb.header.info.spacing);
+        let transform = match spec.affine() {
+            Some((m, t)) => Some(placement(db, &ldb, Affine { m, t }, i)?),
+            None => None,
+        };
         let same_spacing =
             (0..3).all(|k| (sa[k] - sb[k]).abs() <= 1e-6 * sa[k].abs().max(sb[k].abs()));
-        if a.dims != b.dims || a.brick != b.brick || a.levels != b.levels || !same_spacing {
+        let same_grid =
+            a.dims == b.dims && a.brick == b.brick && a.levels == b.levels && same_spacing;
+        if transform.is_none() && !same_grid {
             bail!(
-                "{}: the layer's grid ({:?} voxels of {:?}, bricks of {}) is not the scene volume's ({:?} voxels of {:?}, bricks of {}); a layer on another grid needs a transform, which is not supported yet",
+                "{}: the layer's grid ({:?} voxels of {:?}, bricks of {}) is not the scene volume's ({:?} voxels of {:?}, bricks of {}); a layer on another grid needs its place in the volume: layer[{i}].transform = [[a, b, c, t], …] (layer space → the volume's)",
                 field("volume", &spec.volume),
                 b.dims,
                 sb,
@@ -206,6 +239,7 @@ fn active_layers(
         }
         out.push(ActiveLayer {
             index: i,
+            transform,
             spec: spec.clone(),
             preint: PreintTable::new(&tf, lo, hi, bins).with_context(|| field(f, file))?,
             empty,

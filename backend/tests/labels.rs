@@ -24,6 +24,7 @@ fn label_layer(volume: &Path, table: &Path) -> Layer {
         opacity: 1.0,
         visible: true,
         view_opacity: None,
+        transform: None,
     }
 }
 

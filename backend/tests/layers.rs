@@ -31,6 +31,7 @@ fn layer(volume: &Path, tf: &Path) -> Layer {
         opacity: 1.0,
         visible: true,
         view_opacity: None,
+        transform: None,
     }
 }
 
@@ -56,6 +57,51 @@ fn bits_differ(a: &[[f32; 4]], b: &[[f32; 4]]) -> usize {
         .count()
 }
 
+/// The CT phantom with Slicer's CT-Bone at half extinction drawn with
+/// `layers` (the other half), against the whole function: the volume alone
+/// and the exact integral, at fine settings. Asserts the bones are in view
+/// and the layered image within 1e-3 of the exact integral and within
+/// `between` of the volume alone (RMSE); prints the figures after `what`.
+fn halves_against_the_whole(
+    dir: &Path,
+    db: &Path,
+    bone: &TransferFunction,
+    layers: &[Layer],
+    what: &str,
+    between: f64,
+) {
+    let vol = Volume::read_all(data::open(&dir.join("ct.nrrd"), None).unwrap().as_mut()).unwrap();
+    let half = bone.scaled_extinction(0.5);
+    let placement = support::ct_placement();
+    let view = View::window([96, 96], [0.3, 0.3], [0.0, 0.0, 0.8]);
+    let cfg = support::exact_config();
+    let (whole, _) = render(db, &[], bone, &placement, &[view], &cfg);
+    let (layered, r) = render(db, layers, &half, &placement, &[view], &cfg);
+    assert_eq!(r.layer_count(), layers.len());
+    let (a, b) = (&layered.images[0], &whole.images[0]);
+    support::assert_valid(what, a);
+    let exact = reference::render(&vol, bone, &placement, &view, Tolerance { abs: 1e-6 });
+    let (e_layered, max_layered) = support::error(a, &exact);
+    let (e_whole, _) = support::error(b, &exact);
+    let alone: Vec<[f64; 4]> = b.iter().map(|p| p.map(f64::from)).collect();
+    let (e_between, max_between) = support::error(a, &alone);
+    let lit = a.iter().filter(|p| p[3] > 0.05).count();
+    println!(
+        "{what}: RMSE {e_layered:.2e} (max {max_layered:.2e}) against the exact integral, the volume alone {e_whole:.2e}; between them RMSE {e_between:.2e}, max {max_between:.2e}; {lit} of {} pixels lit; {} bytes read",
+        a.len(),
+        layered.stats.bytes_read
+    );
+    assert!(lit > a.len() / 10, "the bones are in view");
+    assert!(
+        e_layered <= 1e-3,
+        "against the exact integral: {e_layered:.2e}"
+    );
+    assert!(
+        e_between <= between,
+        "against the volume alone: {e_between:.2e}"
+    );
+}
+
 /// Two layers of one volume with half its extinction each are that volume
 /// with the whole (the averages of τ and k̃ over a segment add): on the CT
 /// phantom with Slicer's CT-Bone, at fine settings, against the exact
@@ -64,48 +110,122 @@ fn bits_differ(a: &[[f32; 4]], b: &[[f32; 4]]) -> usize {
 fn two_half_extinction_layers_are_the_whole_volume() {
     let dir = tempfile::tempdir().unwrap();
     let (db, bone) = support::ct_bone(dir.path(), BrickEncoding::F32);
+    let half_file = write_tf(&dir.path().join("half.toml"), &bone.scaled_extinction(0.5));
+    let layers = [layer(&db, &half_file)];
+    halves_against_the_whole(
+        dir.path(),
+        &db,
+        &bone,
+        &layers,
+        "two half-extinction layers",
+        1e-4,
+    );
+}
+
+/// The CT phantom flipped in x and cropped by `crop` voxels at its low y
+/// and z edges (and its high x edge), on bricks of 16 instead of 32, and
+/// the transform that puts it back on the volume (layer space → the
+/// volume's): a layer on another grid whose voxel centres land on the
+/// volume's.
+fn flipped_and_cropped(vol: &Volume, crop: [usize; 3]) -> (Volume, Vec<[f64; 4]>) {
+    let [n0, n1, n2] = vol.info.dims;
+    let s = vol.info.spacing;
+    let dims = [n0 - crop[0], n1 - crop[1], n2 - crop[2]];
+    let mut data = Vec::with_capacity(dims.iter().product());
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let (a, b, c) = (n0 - 1 - i, j + crop[1], k + crop[2]);
+                data.push(vol.data[(c * n1 + b) * n0 + a]);
+            }
+        }
+    }
+    let info = parallax_backend::volume::VolumeInfo {
+        dims,
+        ..vol.info.clone()
+    };
+    let transform = vec![
+        [-1.0, 0.0, 0.0, n0 as f64 * s[0]],
+        [0.0, 1.0, 0.0, crop[1] as f64 * s[1]],
+        [0.0, 0.0, 1.0, crop[2] as f64 * s[2]],
+    ];
+    (Volume::new(info, data), transform)
+}
+
+/// A layer on another grid (flipped, cropped, other bricks) placed by its
+/// transform: resampled onto the volume's bricks as they are read, it
+/// lands on the volume, so two half-extinction layers, one of them
+/// placed, are the whole volume against the exact integral and against
+/// the volume alone; the layer's bricks are read only where its function
+/// sees data; and the same layer without its transform is refused.
+#[test]
+fn a_layer_on_another_grid_lands_by_its_transform() {
+    let dir = tempfile::tempdir().unwrap();
+    let (db, bone) = support::ct_bone(dir.path(), BrickEncoding::F32);
     let vol = Volume::read_all(
         data::open(&dir.path().join("ct.nrrd"), None)
             .unwrap()
             .as_mut(),
     )
     .unwrap();
-    let half = bone.scaled_extinction(0.5);
-    let half_file = write_tf(&dir.path().join("half.toml"), &half);
-    let placement = support::ct_placement();
-    let view = View::window([96, 96], [0.3, 0.3], [0.0, 0.0, 0.8]);
-    let cfg = support::exact_config();
-    let (whole, _) = render(&db, &[], &bone, &placement, &[view], &cfg);
-    let (layered, r) = render(
+    let (moved, transform) = flipped_and_cropped(&vol, [2, 3, 5]);
+    let placed_db = dir.path().join("placed.pxo");
+    support::import_volume(&moved, &placed_db, 16, BrickEncoding::U8Range);
+    let half_file = write_tf(&dir.path().join("half.toml"), &bone.scaled_extinction(0.5));
+    let placed = Layer {
+        transform: Some(transform),
+        ..layer(&placed_db, &half_file)
+    };
+    halves_against_the_whole(
+        dir.path(),
         &db,
-        &[layer(&db, &half_file)],
-        &half,
-        &placement,
-        &[view],
+        &bone,
+        std::slice::from_ref(&placed),
+        "a half layer on another grid (flipped in x, cropped, bricks of 16, 8-bit codes) placed by its transform, the volume at half extinction",
+        2e-3,
+    );
+    let cfg = RenderConfig::default();
+    // Without its transform the layer is refused, naming the field.
+    let e = Renderer::with_layers(
+        &db,
+        &[layer(&placed_db, &half_file)],
         &cfg,
-    );
-    assert_eq!(r.layer_count(), 1);
-    let (a, b) = (&layered.images[0], &whole.images[0]);
-    support::assert_valid("two half layers", a);
-    let exact = reference::render(&vol, &bone, &placement, &view, Tolerance { abs: 1e-6 });
-    let (e_layered, max_layered) = support::error(a, &exact);
-    let (e_whole, _) = support::error(b, &exact);
-    let between: Vec<[f64; 4]> = b.iter().map(|p| p.map(f64::from)).collect();
-    let (e_between, max_between) = support::error(a, &between);
-    let lit = a.iter().filter(|p| p[3] > 0.05).count();
-    println!(
-        "two half-extinction layers: RMSE {e_layered:.2e} (max {max_layered:.2e}) against the exact integral, the volume alone {e_whole:.2e}; between them RMSE {e_between:.2e}, max {max_between:.2e}; {lit} of {} pixels lit",
-        a.len()
-    );
-    assert!(lit > a.len() / 10, "the bones are in view");
-    assert!(
-        e_layered <= 1e-3,
-        "against the exact integral: {e_layered:.2e}"
-    );
-    assert!(
-        e_between <= 1e-4,
-        "against the volume alone: {e_between:.2e}"
-    );
+        &AdapterRequest::from_env(None, 0),
+    )
+    .err()
+    .map(|e| format!("{e:#}"))
+    .expect("refused");
+    assert!(e.contains("layer[0].transform"), "{e}");
+    // Placed outside the volume, or flattened: refused.
+    for (t, want) in [
+        (
+            vec![
+                [1.0, 0.0, 0.0, 500.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0, 0.0],
+            ],
+            "outside the scene volume",
+        ),
+        (
+            vec![
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0, 0.0],
+            ],
+            "singular",
+        ),
+    ] {
+        let l = Layer {
+            transform: Some(t),
+            ..placed.clone()
+        };
+        let e = Renderer::with_layers(&db, &[l], &cfg, &AdapterRequest::from_env(None, 0))
+            .err()
+            .map(|e| format!("{e:#}"))
+            .expect("refused");
+        println!("refused: {e}");
+        assert!(e.contains("layer[0].transform") && e.contains(want), "{e}");
+    }
 }
 
 /// A layer whose transfer function is empty over its data costs nothing:
@@ -232,6 +352,7 @@ fn view_dependent_opacity_follows_the_smoothstep() {
         let l = Layer {
             opacity,
             view_opacity,
+            transform: None,
             ..layer(&db, &bone_file)
         };
         render(&db, &[l], &soft, &placement, &[view], &cfg).0
@@ -431,6 +552,7 @@ fn a_layers_share_at_two_eyes_follows_the_smoothstep() {
         let with = |opacity: f64, view_opacity| Layer {
             opacity,
             view_opacity,
+            transform: None,
             ..layer(&db, &skin_file)
         };
         // The eye's direction to the head's centre, and its factor.

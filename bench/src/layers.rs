@@ -1,5 +1,6 @@
 //! What registered layers cost (`[[layer]]`, G10 §4): a volume with one or
-//! two layers on its grid against the volume alone, at the user's default
+//! two layers on its grid, or one on another grid placed by a transform,
+//! against the volume alone, at the user's default
 //! settings. The layers are the volume itself, so that the media are the
 //! same whatever the count: with n layers, each of the n + 1 media takes
 //! 1/(n + 1) of the function's extinction, and the image is the volume's
@@ -41,8 +42,16 @@ fn write_tf(dir: &Path, name: &str, tf: &TransferFunction) -> Result<PathBuf> {
 }
 
 /// Runs the study on `shot` at `cfg` (`out` holds the layers' transfer
-/// functions), `rounds` timed rounds.
-pub fn run(shot: Shot, cfg: &RenderConfig, rounds: usize, out: &Path) -> Result<Vec<LayerPoint>> {
+/// functions), `rounds` timed rounds; `other_grid` is the volume on other
+/// bricks, the layer that a transform places (the identity: its voxel
+/// centres are the volume's, so the image stays the volume's).
+pub fn run(
+    shot: Shot,
+    other_grid: &Path,
+    cfg: &RenderConfig,
+    rounds: usize,
+    out: &Path,
+) -> Result<Vec<LayerPoint>> {
     let layer = |tf: PathBuf| Layer {
         volume: shot.db.to_path_buf(),
         transfer_function: Some(tf),
@@ -50,6 +59,16 @@ pub fn run(shot: Shot, cfg: &RenderConfig, rounds: usize, out: &Path) -> Result<
         opacity: 1.0,
         visible: true,
         view_opacity: None,
+        transform: None,
+    };
+    let placed = |tf: PathBuf| Layer {
+        volume: other_grid.to_path_buf(),
+        transform: Some(vec![
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+        ]),
+        ..layer(tf)
     };
     let p = shot.tf.points();
     let top = p.last().map_or(1.0, |q| q.value);
@@ -86,19 +105,26 @@ pub fn run(shot: Shot, cfg: &RenderConfig, rounds: usize, out: &Path) -> Result<
             0,
         ),
         (
+            "2 unaligned media (1 layer on bricks of 16, placed), 1/2 each",
+            &half,
+            vec![placed(half_file.clone())],
+            cfg,
+            0,
+        ),
+        (
             "3 aligned media (2 layers), 1/3 each",
             &third,
             vec![layer(third_file.clone()), layer(third_file)],
             cfg,
             0,
         ),
-        ("MImDA: the volume alone", shot.tf, vec![], &mimda, 4),
+        ("MImDA: the volume alone", shot.tf, vec![], &mimda, 5),
         (
             "MImDA: 2 aligned media, 1/2 each",
             &half,
             vec![layer(half_file)],
             &mimda,
-            4,
+            5,
         ),
     ];
     let mut renderers = Vec::new();
@@ -149,12 +175,12 @@ pub fn run(shot: Shot, cfg: &RenderConfig, rounds: usize, out: &Path) -> Result<
 /// The table on stdout.
 pub fn print(points: &[LayerPoint]) {
     println!(
-        "{:<40} {:>6} {:>10} {:>8} {:>10} {:>6}",
+        "{:<62} {:>6} {:>10} {:>8} {:>10} {:>6}",
         "case", "layers", "render ms", "ratio", "RMSE", "equal"
     );
     for p in points {
         println!(
-            "{:<40} {:>6} {:>10.1} {:>8.2} {:>10.2e} {:>6}",
+            "{:<62} {:>6} {:>10.1} {:>8.2} {:>10.2e} {:>6}",
             p.name, p.drawn, p.render_ms, p.time_ratio, p.rmse, p.equal
         );
     }

@@ -288,10 +288,11 @@ pub struct Scene {
 /// the volume and its layers as the four channels of one brick pool.
 pub const MAX_LAYERS: usize = 3;
 
-/// `[[layer]]` of a scene: a volume on the scene volume's grid (the same
-/// dimensions, brick size and spacing), drawn through its own transfer
-/// function. Where layers overlap their extinctions and extinction-weighted
-/// emissions add: the exact integral of the summed medium.
+/// `[[layer]]` of a scene: a volume registered to the scene volume, on its
+/// grid (the same dimensions, brick size and spacing) or placed in it by
+/// an affine `transform`, drawn through its own transfer function. Where
+/// layers overlap their extinctions and extinction-weighted emissions add:
+/// the exact integral of the summed medium.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Layer {
@@ -317,6 +318,14 @@ pub struct Layer {
     /// The layer's opacity as a function of the view direction (G10 §4).
     #[serde(default)]
     pub view_opacity: Option<ViewOpacity>,
+    /// Where a layer on another grid lies in the scene volume: the affine
+    /// map from the layer's volume space to the scene volume's (both in
+    /// data units, from the first voxel's corner; a registration's
+    /// moving-to-fixed matrix), three rows `[a, b, c, t]` or four with
+    /// `[0, 0, 0, 1]` last. Without it the layer must be on the volume's
+    /// grid.
+    #[serde(default)]
+    pub transform: Option<Vec<[f64; 4]>>,
 }
 
 impl Layer {
@@ -328,6 +337,18 @@ impl Layer {
             (None, Some(t)) => ("transfer_function", t),
             (None, None) => ("transfer_function", Path::new("")),
         }
+    }
+
+    /// The layer's `transform` as its linear part (rows) and translation:
+    /// layer space → scene volume space. `None` without one (or a malformed
+    /// one, which `Scene::load` refuses).
+    pub fn affine(&self) -> Option<([[f64; 3]; 3], [f64; 3])> {
+        let t = self.transform.as_ref()?;
+        if !(3..=4).contains(&t.len()) {
+            return None;
+        }
+        let m = std::array::from_fn(|r| [t[r][0], t[r][1], t[r][2]]);
+        Some((m, [t[0][3], t[1][3], t[2][3]]))
     }
 
     /// A label layer (its function is a colour table).
@@ -387,6 +408,34 @@ impl ViewOpacity {
     }
 }
 
+/// Checks a layer's `transform`: three rows of four numbers, or four with
+/// `[0, 0, 0, 1]` last, finite, its linear part invertible.
+fn check_transform(file: &Path, field: &str, t: &[[f64; 4]]) -> Result<()> {
+    let f = file.display();
+    if !(3..=4).contains(&t.len()) {
+        bail!(
+            "{f}: {field}: an affine map is three rows [a, b, c, t] (or four, the last [0, 0, 0, 1]); got {} rows",
+            t.len()
+        );
+    }
+    finite(file, field, t.as_flattened())?;
+    if t.len() == 4 && t[3] != [0.0, 0.0, 0.0, 1.0] {
+        bail!(
+            "{f}: {field}: the fourth row must be [0, 0, 0, 1] (an affine map; got {:?})",
+            t[3]
+        );
+    }
+    let m: [[f64; 3]; 3] = std::array::from_fn(|r| [t[r][0], t[r][1], t[r][2]]);
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    let scale = m.as_flattened().iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    if det.abs() <= 1e-9 * scale.powi(3) {
+        bail!("{f}: {field}: the linear part is singular (determinant {det:.3e}): it would flatten the layer");
+    }
+    Ok(())
+}
+
 /// Checks a scene's `[[layer]]`s: their number, opacity, view opacity, and
 /// their transfer functions (the databases are opened, and their grids
 /// checked, by the back ends).
@@ -411,6 +460,9 @@ fn check_layers(file: &Path, layers: &[Layer]) -> Result<()> {
                 "{f}: layer[{i}].opacity must be in [0, 1] (got {})",
                 l.opacity
             );
+        }
+        if let Some(t) = &l.transform {
+            check_transform(file, &format!("layer[{i}].transform"), t)?;
         }
         if let Some(v) = &l.view_opacity {
             finite(file, &format!("layer[{i}].view_opacity.axis"), &v.axis)?;
@@ -962,7 +1014,36 @@ mod tests {
         assert!(s.layers[0].is_labels());
         assert_eq!(s.layers[0].function_file().1, d.path().join("labels.txt"));
         assert_eq!(s.layers[0].load_function().unwrap().points().len(), 2);
+        // A layer on another grid: three rows, or four ending [0, 0, 0, 1].
+        for rows in [
+            "[[0, 1, 0, 5], [-1, 0, 0, 2.5], [0, 0, 2, 0]]",
+            "[[0, 1, 0, 5], [-1, 0, 0, 2.5], [0, 0, 2, 0], [0, 0, 0, 1]]",
+        ] {
+            let text = format!("{head}{labels}transform = {rows}\n");
+            let s = Scene::load(&write(d.path(), "s3.toml", &text)).unwrap();
+            let (m, t) = s.layers[0].affine().unwrap();
+            assert_eq!(m, [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 2.0]]);
+            assert_eq!(t, [5.0, 2.5, 0.0]);
+        }
         let cases = [
+            (
+                format!("{layer}transform = [[1, 0, 0, 0], [0, 1, 0, 0]]\n"),
+                "layer[0].transform: an affine map is three rows",
+            ),
+            (
+                format!(
+                    "{layer}transform = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [1, 0, 0, 1]]\n"
+                ),
+                "layer[0].transform: the fourth row",
+            ),
+            (
+                format!("{layer}transform = [[1, 0, 0, 0], [0, 1, 0, 0], [1, 1, 0, 0]]\n"),
+                "layer[0].transform: the linear part is singular",
+            ),
+            (
+                format!("{layer}transform = [[1, 0, 0, nan], [0, 1, 0, 0], [0, 0, 1, 0]]\n"),
+                "layer[0].transform must be finite",
+            ),
             (
                 format!("{labels}transfer_function = \"tf.toml\"\n"),
                 "layer[0]: give either transfer_function",

@@ -125,8 +125,9 @@ enum Study {
     },
     /// What registered layers cost against the volume alone: one and two
     /// aligned layers (the volume again, the extinction shared so that the
-    /// image stays the volume's) and an empty layer, at the default
-    /// settings (DIR/layers.csv).
+    /// image stays the volume's), one on another grid placed by a
+    /// transform, and an empty layer, at the default settings
+    /// (DIR/layers.csv).
     Layers {
         /// A volume file.
         #[arg(long, default_value = "/usr/share/mricron/templates/ch2.nii.gz")]
@@ -216,8 +217,20 @@ fn layers(volume: &Path, tf: &Path, size: [u32; 2], rounds: usize, out: &Path) -
         placement: &placement,
         view: &view,
     };
+    // The volume again on another grid (bricks of 16), for the layer
+    // placed by a transform.
+    let other = out.join("layers-b16.pxo");
+    parallax_backend::store::import(
+        data::open(volume, None)?.as_mut(),
+        &other,
+        &volume.display().to_string(),
+        &parallax_backend::store::ImportOptions {
+            brick: 16,
+            ..Default::default()
+        },
+    )?;
     let cfg = parallax_common::config::RenderConfig::default();
-    let p = parallax_bench::layers::run(shot, &cfg, rounds, out)?;
+    let p = parallax_bench::layers::run(shot, &other, &cfg, rounds, out)?;
     parallax_bench::layers::print(&p);
     parallax_bench::layers::write_csv(&out.join("layers.csv"), &p)?;
     wrote(out, "layers.csv")

@@ -37,6 +37,12 @@ pub fn run(a: Args) -> Result<()> {
                     v.axis, v.angles_deg[0], v.angles_deg[1]
                 ))
             );
+            if let Some((m, t)) = l.affine() {
+                println!(
+                    "transform:     layer space → the volume's: rows {:?}, translation {t:?}",
+                    m
+                );
+            }
             describe(&l.volume, a.verify).with_context(|| format!("layer[{i}].volume"))?;
         }
         return Ok(());

@@ -110,6 +110,8 @@ impl Drop for IoPool {
 pub(crate) struct Source {
     pub db: Arc<OctreeDb>,
     pub empty: Option<EmptinessTable>,
+    /// A layer on another grid: resampled onto the volume's bricks.
+    pub placed: Option<super::resample::Placed>,
 }
 
 /// One node's brick: the scene volume's alone, or, with registered layers,
@@ -129,6 +131,15 @@ pub(crate) fn read_node(sources: &[Source], key: NodeKey) -> anyhow::Result<(Opt
     }
     let mut layers = Vec::with_capacity(sources.len() - 1);
     for s in &sources[1..] {
+        if let (Some(p), Some(e)) = (&s.placed, &s.empty) {
+            let (v, b) = match p.cover(key, e).needs_data {
+                true => p.brick(key, e)?,
+                false => (None, 0),
+            };
+            bytes += b;
+            layers.push(v);
+            continue;
+        }
         let wanted = s.db.node(key).is_some_and(|r| {
             r.is_stored()
                 && !s

@@ -29,6 +29,7 @@ mod feedback;
 pub(crate) mod geometry;
 mod io;
 mod ranges;
+mod resample;
 
 use crate::geometry::{Geometry, SceneGeometry};
 use crate::index::{CutNode, SpatialIndex, MAX_INDEX_NODES, NO_SLOT};
@@ -42,6 +43,7 @@ use parallax_common::camera::{Placement, View};
 use parallax_common::protocol::HeldBack;
 use parallax_common::tf::EmptinessTable;
 use ranges::SubtreeRanges;
+pub use resample::Affine;
 use serde::Serialize;
 use std::collections::{BTreeSet, BinaryHeap, HashMap, HashSet, VecDeque};
 use std::sync::Arc;
@@ -208,18 +210,31 @@ struct Build {
     stats: CutStats,
 }
 
+/// A registered layer as the loader reads it.
+pub struct LayerSource {
+    pub db: Arc<OctreeDb>,
+    /// Its transfer function's emptiness.
+    pub empty: EmptinessTable,
+    /// Where it lies in the scene volume (layer space → the volume's), for
+    /// a layer on another grid; `None` on the volume's grid.
+    pub transform: Option<Affine>,
+    /// A label layer: resampled at the nearest voxel.
+    pub nearest: bool,
+}
+
 /// The adaptive loader of one back-end process: one CPU cache, one GPU pool
 /// and one cut for all of the process's views (G10 §5).
 pub struct Loader {
     db: Arc<OctreeDb>,
     /// The scene volume's database, then its registered layers' (one
-    /// traversal serves all: their octrees align).
+    /// traversal serves all: their octrees align, or they are resampled
+    /// onto the volume's).
     sources: Arc<Vec<Source>>,
     cfg: LoaderConfig,
     geom: Geometry,
     ranges: SubtreeRanges,
     /// The layers' subtree ranges, in `sources` order after the volume.
-    layer_ranges: Vec<SubtreeRanges>,
+    layer_ranges: Vec<Option<SubtreeRanges>>,
     l2: ByteLru,
     gpu: SlotPool,
     io: IoPool,
@@ -257,20 +272,22 @@ impl Loader {
         Self::with_layers(db, Vec::new(), cfg)
     }
 
-    /// A loader over a scene volume and its registered layers: databases of
-    /// the same octree, each layer with its transfer function's emptiness
-    /// (fixed for the loader's life). A node needs a GPU slot where any of
-    /// them has data there that is not empty; it is read with every layer
-    /// that has (never a layer's empty brick), and takes one slot.
-    pub fn with_layers(
-        db: Arc<OctreeDb>,
-        layers: Vec<(Arc<OctreeDb>, EmptinessTable)>,
-        cfg: LoaderConfig,
-    ) -> Self {
+    /// A loader over a scene volume and its registered layers, each with
+    /// its transfer function's emptiness (fixed for the loader's life): on
+    /// the same octree, or placed by an affine map and resampled onto the
+    /// volume's bricks as they are read (`resample`). A node needs a GPU
+    /// slot where any of them has data there that is not empty; it is read
+    /// with every layer that has (never a layer's empty brick), and takes
+    /// one slot.
+    pub fn with_layers(db: Arc<OctreeDb>, layers: Vec<LayerSource>, cfg: LoaderConfig) -> Self {
         let layout = *db.layout();
         let geom = Geometry::new(layout, db.header.info.spacing);
         let ranges = SubtreeRanges::new(&db);
-        let layer_ranges = layers.iter().map(|(d, _)| SubtreeRanges::new(d)).collect();
+        // (A placed layer keeps its own, in `resample::Placed`.)
+        let layer_ranges = layers
+            .iter()
+            .map(|l| l.transform.is_none().then(|| SubtreeRanges::new(&l.db)))
+            .collect();
         let channels = 1 + layers.len() as u64;
         let brick_bytes = (layout.stored_len() * std::mem::size_of::<f32>()) as u64 * channels;
         let l2_bricks = (cfg.cpu_budget_bytes / brick_bytes.max(1)).min(usize::MAX as u64) as usize;
@@ -279,12 +296,22 @@ impl Loader {
             std::iter::once(Source {
                 db: db.clone(),
                 empty: None,
+                placed: None,
             })
-            .chain(
-                layers
-                    .into_iter()
-                    .map(|(db, e)| Source { db, empty: Some(e) }),
-            )
+            .chain(layers.into_iter().map(|l| Source {
+                placed: l.transform.map(|t| {
+                    resample::Placed::new(
+                        l.db.clone(),
+                        layout,
+                        db.header.info.spacing,
+                        t,
+                        l.nearest,
+                    )
+                    .expect("an invertible layer transform (the renderer checks it)")
+                }),
+                db: l.db,
+                empty: Some(l.empty),
+            }))
             .collect::<Vec<_>>(),
         );
         let io = IoPool::new(sources.clone(), cfg.io_threads.max(1));
@@ -524,6 +551,14 @@ impl Loader {
         // needs data where any has some (`io::read_node` reads those).
         for (s, ranges) in self.sources[1..].iter().zip(&self.layer_ranges) {
             let Some(e) = &s.empty else { continue };
+            let Some(ranges) = ranges else {
+                if let Some(p) = &s.placed {
+                    let cover = p.cover(key, e);
+                    c.culled_empty &= cover.culled;
+                    c.needs_data |= cover.needs_data;
+                }
+                continue;
+            };
             let culled = ranges
                 .get(key)
                 .is_none_or(|(lo, hi)| e.is_empty(lo as f64, hi as f64));
