@@ -176,54 +176,22 @@ fn natural_order_puts_slice2_before_slice10() {
 #[test]
 fn a_dicom_series_renders_the_same_image_as_the_nrrd() {
     let d = tempfile::tempdir().unwrap();
-    let bin = env!("CARGO_BIN_EXE_parallax");
-    let run = |args: &[&str]| {
-        let o = Command::new(bin).args(args).output().unwrap();
-        assert!(
-            o.status.success(),
-            "parallax {args:?}:\n{}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
-    };
     let nrrd = inputs().join("ct.nrrd");
     let dicom = inputs().join("dicom");
-    run(&[
-        "import",
-        nrrd.to_str().unwrap(),
-        "-o",
-        d.path().join("a.pxo").to_str().unwrap(),
-        "--brick",
-        "8",
-    ]);
-    let said = run(&[
-        "import",
-        dicom.to_str().unwrap(),
-        "-o",
-        d.path().join("b.pxo").to_str().unwrap(),
-        "--brick",
-        "8",
-    ]);
+    let a = d.path().join("a.pxo");
+    run(&["import", s(&nrrd), "-o", s(&a), "--brick", "8"]);
+    let b = d.path().join("b.pxo");
+    let said = run(&["import", s(&dicom), "-o", s(&b), "--brick", "8"]);
     assert!(said.contains("patient (LPS) directions"), "{said}");
-    let info = run(&["info", d.path().join("b.pxo").to_str().unwrap()]);
+    let info = run(&["info", s(&b)]);
     assert!(
         info.contains("DICOM series 1.2.826.0.1.3680043.8.498.10"),
         "{info}"
     );
+    write_display(d.path());
     std::fs::write(
         d.path().join("tf.toml"),
         "[[point]]\nvalue = -1000\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 0\ncolor = [0.9, 0.5, 0.4]\nextinction = 0.3\n[[point]]\nvalue = 1000\ncolor = [1, 1, 1]\nextinction = 2\n",
-    )
-    .unwrap();
-    std::fs::write(
-        d.path().join("display.toml"),
-        "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.01\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
-    )
-    .unwrap();
-    std::fs::create_dir_all(d.path().join("p")).unwrap();
-    std::fs::write(
-        d.path().join("p/v.toml"),
-        "id = \"v\"\nposition = [0, 0, 0.8]\nresolution = [40, 30]\n",
     )
     .unwrap();
     let mut images = Vec::new();
@@ -231,26 +199,10 @@ fn a_dicom_series_renders_the_same_image_as_the_nrrd() {
         let scene = d.path().join(format!("{db}.toml"));
         std::fs::write(
             &scene,
-            format!("volume = \"{db}.pxo\"\ntransfer_function = \"tf.toml\"\ndisplay = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\nrotation_deg = [20, 30, 0]\n"),
+            format!("volume = \"{db}.pxo\"\ntransfer_function = \"tf.toml\"\n{SCENE_VIEW}"),
         )
         .unwrap();
-        let out = d.path().join(format!("out-{db}"));
-        run(&[
-            "render",
-            "--scene",
-            scene.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--float",
-        ]);
-        let frames: Vec<_> = std::fs::read_dir(&out)
-            .unwrap()
-            .filter_map(|e| e.ok())
-            .filter(|e| e.file_name().to_string_lossy().starts_with("frame_"))
-            .map(|e| e.path())
-            .collect();
-        let last = frames.iter().max().unwrap();
-        let (_, _, px) = parallax_backend::output::read_npy(&last.join("v.npy")).unwrap();
+        let px = render_last(&scene, &d.path().join(format!("out-{db}")));
         assert!(
             px.iter().any(|p| p[3] > 0.05),
             "{db}: the volume is visible"
@@ -258,6 +210,169 @@ fn a_dicom_series_renders_the_same_image_as_the_nrrd() {
         images.push(px);
     }
     assert_eq!(images[0], images[1], "bit for bit");
+}
+
+/// Runs the binary; its stdout and stderr, or a panic naming the call.
+fn run(args: &[&str]) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_parallax"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "parallax {args:?}:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The scenes' display (one 40×30 view) and placement.
+const SCENE_VIEW: &str = "display = \"display.toml\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\nrotation_deg = [20, 30, 0]\n";
+
+fn write_display(dir: &Path) {
+    std::fs::write(
+        dir.join("display.toml"),
+        "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.01\n[observer]\nposition = [0, 0, 0.8]\nprojectors = \"p/\"\n",
+    )
+    .unwrap();
+    std::fs::create_dir_all(dir.join("p")).unwrap();
+    std::fs::write(
+        dir.join("p/v.toml"),
+        "id = \"v\"\nposition = [0, 0, 0.8]\nresolution = [40, 30]\n",
+    )
+    .unwrap();
+}
+
+/// `parallax render --float` of `scene` into `out`: its last frame's view.
+fn render_last(scene: &Path, out: &Path) -> Vec<[f32; 4]> {
+    run(&["render", "--scene", s(scene), "--out", s(out), "--float"]);
+    let frames: Vec<_> = std::fs::read_dir(out)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("frame_"))
+        .map(|e| e.path())
+        .collect();
+    let last = frames.iter().max().unwrap();
+    parallax_backend::output::read_npy(&last.join("v.npy"))
+        .unwrap()
+        .2
+}
+
+/// A DICOM segmentation lands on its CT by the scanner geometry both
+/// series carry (`[[layer]] transform = "scanner"`): the label series of
+/// `make_inputs.py` is on another grid (cropped, its rows running to −x,
+/// its slice normal −z), and drawn over the CT it gives the image of the
+/// same labels made on the CT's own grid (`--labels-from-thresholds`). A
+/// layer whose database has no scanner geometry (a NRRD without a space)
+/// is refused naming the field.
+#[test]
+fn a_dicom_segmentation_lands_on_its_ct_by_the_scanner_geometry() {
+    let d = tempfile::tempdir().unwrap();
+    let dicom = inputs().join("dicom");
+    let ct = d.path().join("ct.pxo");
+    run(&["import", s(&dicom), "-o", s(&ct), "--brick", "8"]);
+    let aligned = d.path().join("aligned.pxo");
+    let thresholds = ["--labels-from-thresholds", "-500,500", "--brick", "8"];
+    run(&[
+        &["import", s(&dicom), "-o", s(&aligned)][..],
+        &thresholds[..],
+    ]
+    .concat());
+    let seg = d.path().join("seg.pxo");
+    let seg_dir = inputs().join("dicom-seg");
+    run(&[
+        "import",
+        s(&seg_dir),
+        "-o",
+        s(&seg),
+        "--labels",
+        "--brick",
+        "8",
+    ]);
+    let info = run(&["info", s(&seg)]);
+    assert!(
+        info.contains("23 × 20 × 14") && info.contains("scanner:"),
+        "{info}"
+    );
+    let nogeo = d.path().join("nogeo.pxo");
+    let nrrd = inputs().join("ct.nrrd");
+    run(&[&["import", s(&nrrd), "-o", s(&nogeo)][..], &thresholds[..]].concat());
+    write_display(d.path());
+    std::fs::write(
+        d.path().join("none.toml"),
+        "[[point]]\nvalue = -1000\ncolor = [0, 0, 0]\nextinction = 0\n[[point]]\nvalue = 3000\ncolor = [0, 0, 0]\nextinction = 0\n",
+    )
+    .unwrap();
+    std::fs::write(
+        d.path().join("labels.txt"),
+        "0 0 0 0 0 0 0 \"air\"\n1 200 120 90 0.3 1 1 \"soft\"\n2 255 250 240 0.9 1 1 \"bone\"\n",
+    )
+    .unwrap();
+    // At the finest level (the two label databases' coarser levels are
+    // made on their own grids).
+    let scene = |name: &str, layer: &str| {
+        let p = d.path().join(name);
+        std::fs::write(
+            &p,
+            format!("volume = \"ct.pxo\"\ntransfer_function = \"none.toml\"\n{SCENE_VIEW}[render]\naccuracy = 0.05\n[[layer]]\nlabels = \"labels.txt\"\n{layer}"),
+        )
+        .unwrap();
+        p
+    };
+    let on_grid = render_last(
+        &scene("aligned.toml", "volume = \"aligned.pxo\"\n"),
+        &d.path().join("out-aligned"),
+    );
+    let placed_scene = scene(
+        "placed.toml",
+        "volume = \"seg.pxo\"\ntransform = \"scanner\"\n",
+    );
+    let info = run(&["info", s(&placed_scene)]);
+    assert!(info.contains("transform:     scanner"), "{info}");
+    let placed = render_last(&placed_scene, &d.path().join("out-placed"));
+    let lit = on_grid.iter().filter(|p| p[3] > 0.05).count();
+    let (mut sq, mut max) = (0.0f64, 0.0f64);
+    for (a, b) in placed.iter().zip(&on_grid) {
+        for c in 0..4 {
+            let e = (a[c] - b[c]) as f64;
+            sq += e * e;
+            max = max.max(e.abs());
+        }
+    }
+    let rmse = (sq / (4 * placed.len()) as f64).sqrt();
+    println!(
+        "a DICOM label series on another grid placed by the scanner geometry, against the same labels on the CT's grid: RMSE {rmse:.2e}, max {max:.2e}; {lit} of {} pixels lit",
+        placed.len()
+    );
+    assert!(lit > 50, "the labels are in view: {lit}");
+    assert!(rmse < 1e-5 && max < 1e-4, "RMSE {rmse:.2e}, max {max:.2e}");
+    // Without scanner geometry: refused, naming the field and the file.
+    let bad = scene(
+        "nogeo.toml",
+        "volume = \"nogeo.pxo\"\ntransform = \"scanner\"\n",
+    );
+    let o = Command::new(env!("CARGO_BIN_EXE_parallax"))
+        .args([
+            "render",
+            "--scene",
+            s(&bad),
+            "--out",
+            s(&d.path().join("x")),
+        ])
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("nogeo.toml")
+            && e.contains("layer[0].transform")
+            && e.contains("no scanner geometry"),
+        "{e}"
+    );
 }
 
 /// Hostile headers (issue 38), written by `make_inputs.py` into `crafted/`:

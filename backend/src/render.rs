@@ -13,7 +13,9 @@ use crate::reconstruct::{subframe_of, ViewHistory, SUBFRAMES};
 use crate::store::{BrickEncoding, NodeKey, OctreeDb};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{Filter, Interpolation, Layer, Mode, RenderConfig, Shading};
+use parallax_common::config::{
+    Filter, Interpolation, Layer, LayerTransform, Mode, RenderConfig, Shading,
+};
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::labels;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
@@ -54,6 +56,31 @@ struct ActiveLayer {
     max_importance: f64,
     /// Layer space → the volume's, for a layer on another grid.
     transform: Option<Affine>,
+}
+
+/// Layer `i`'s `transform = "scanner"`: the map from its volume space to
+/// the scene volume's through the scanner's patient space, W_v⁻¹ ∘ W_l,
+/// from the geometry both importers recorded (`Summary::world`).
+fn scanner_map(db: &OctreeDb, ldb: &OctreeDb, i: usize) -> Result<Affine> {
+    let world = |d: &OctreeDb, what: &str| -> Result<Affine> {
+        let w = d.summary.world.with_context(|| {
+            format!(
+                "layer[{i}].transform = \"scanner\": {what} {} has no scanner geometry (its source file gave none, or it was imported before .pxo format 7); give the map's rows instead",
+                d.path().display()
+            )
+        })?;
+        Ok(Affine {
+            m: std::array::from_fn(|r| [w[r][0], w[r][1], w[r][2]]),
+            t: [w[0][3], w[1][3], w[2][3]],
+        })
+    };
+    let (wv, wl) = (world(db, "the scene volume")?, world(ldb, "the layer")?);
+    let inv = wv.inverse().with_context(|| {
+        format!(
+            "layer[{i}].transform = \"scanner\": the scene volume's scanner geometry is singular"
+        )
+    })?;
+    Ok(inv.compose(&wl))
 }
 
 /// Layer `i`'s `transform`, checked: invertible, and placing some of the
@@ -169,8 +196,16 @@ fn active_layers(
         let ldb = OctreeDb::open(&spec.volume).with_context(|| field("volume", &spec.volume))?;
         let (a, b) = (db.layout(), ldb.layout());
         let (sa, sb) = (db.header.info.spacing, ldb.header.info.spacing);
-        let transform = match spec.affine() {
-            Some((m, t)) => Some(placement(db, &ldb, Affine { m, t }, i)?),
+        let transform = match &spec.transform {
+            Some(LayerTransform::Scanner) => {
+                Some(placement(db, &ldb, scanner_map(db, &ldb, i)?, i)?)
+            }
+            Some(LayerTransform::Matrix(_)) => {
+                let (m, t) = spec
+                    .affine()
+                    .with_context(|| format!("layer[{i}].transform: not an affine map"))?;
+                Some(placement(db, &ldb, Affine { m, t }, i)?)
+            }
             None => None,
         };
         let same_spacing =

@@ -158,6 +158,12 @@ pub trait VolumeSource {
     fn describe(&self) -> Option<String> {
         None
     }
+    /// Where the volume lies in the scanner's patient space, if the file
+    /// says: the affine map from volume space (data units from the first
+    /// voxel's corner) to LPS millimetres (`store::Summary::world`).
+    fn world(&self) -> Option<[[f64; 4]; 3]> {
+        None
+    }
     /// NaN in the input means "no data": passed on as NaN instead of
     /// refused (sources whose samples cannot be NaN ignore this).
     fn set_nan_empty(&mut self) {}

@@ -1,5 +1,6 @@
 //! Registered layers (a scene's `[[layer]]`s, G10 §4): volumes on the scene
-//! volume's grid, each drawn through its own transfer function and combined
+//! volume's grid or placed by a transform, each drawn through its own
+//! transfer function and combined
 //! with it as media (extinctions and extinction-weighted emissions add).
 //! Measured against the exact integral, against the volume alone, and for
 //! what they cost when they show nothing. Every test prints the figures it
@@ -13,7 +14,7 @@ use parallax_backend::render::{Frame, Renderer};
 use parallax_backend::store::BrickEncoding;
 use parallax_backend::volume::{Volume, VoxelType};
 use parallax_common::camera::{Placement, View};
-use parallax_common::config::{Layer, Mode, RenderConfig, ViewOpacity};
+use parallax_common::config::{Layer, LayerTransform, Mode, RenderConfig, ViewOpacity};
 use parallax_common::tf::{ControlPoint, TransferFunction};
 use std::path::{Path, PathBuf};
 
@@ -173,7 +174,7 @@ fn a_layer_on_another_grid_lands_by_its_transform() {
     support::import_volume(&moved, &placed_db, 16, BrickEncoding::U8Range);
     let half_file = write_tf(&dir.path().join("half.toml"), &bone.scaled_extinction(0.5));
     let placed = Layer {
-        transform: Some(transform),
+        transform: Some(LayerTransform::Matrix(transform)),
         ..layer(&placed_db, &half_file)
     };
     halves_against_the_whole(
@@ -216,7 +217,7 @@ fn a_layer_on_another_grid_lands_by_its_transform() {
         ),
     ] {
         let l = Layer {
-            transform: Some(t),
+            transform: Some(LayerTransform::Matrix(t)),
             ..placed.clone()
         };
         let e = Renderer::with_layers(&db, &[l], &cfg, &AdapterRequest::from_env(None, 0))

@@ -13,7 +13,7 @@ use crate::measure::{self, timed_frame, write_table, Shot};
 use anyhow::Result;
 use parallax_backend::gpu::AdapterRequest;
 use parallax_backend::render::Renderer;
-use parallax_common::config::{Layer, Mode, RenderConfig};
+use parallax_common::config::{Layer, LayerTransform, Mode, RenderConfig};
 use parallax_common::tf::{ControlPoint, TransferFunction};
 use std::path::{Path, PathBuf};
 
@@ -63,11 +63,11 @@ pub fn run(
     };
     let placed = |tf: PathBuf| Layer {
         volume: other_grid.to_path_buf(),
-        transform: Some(vec![
+        transform: Some(LayerTransform::Matrix(vec![
             [1.0, 0.0, 0.0, 0.0],
             [0.0, 1.0, 0.0, 0.0],
             [0.0, 0.0, 1.0, 0.0],
-        ]),
+        ])),
         ..layer(tf)
     };
     let p = shot.tf.points();

@@ -318,14 +318,73 @@ pub struct Layer {
     /// The layer's opacity as a function of the view direction (G10 §4).
     #[serde(default)]
     pub view_opacity: Option<ViewOpacity>,
-    /// Where a layer on another grid lies in the scene volume: the affine
-    /// map from the layer's volume space to the scene volume's (both in
-    /// data units, from the first voxel's corner; a registration's
-    /// moving-to-fixed matrix), three rows `[a, b, c, t]` or four with
-    /// `[0, 0, 0, 1]` last. Without it the layer must be on the volume's
+    /// Where a layer on another grid lies in the scene volume
+    /// ([`LayerTransform`]). Without it the layer must be on the volume's
     /// grid.
     #[serde(default)]
-    pub transform: Option<Vec<[f64; 4]>>,
+    pub transform: Option<LayerTransform>,
+}
+
+/// A layer's place in the scene volume (`[[layer]] transform`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum LayerTransform {
+    /// `"scanner"`: where the scanner put it: the layer's and the volume's
+    /// scanner geometry as their importers read it (DICOM, NIfTI's sform or
+    /// qform, NRRD's space), so a segmentation lands on its CT.
+    Scanner,
+    /// The affine map from the layer's volume space to the scene volume's
+    /// (both in data units, from the first voxel's corner; a registration's
+    /// moving-to-fixed matrix): three rows `[a, b, c, t]`, or four with
+    /// `[0, 0, 0, 1]` last.
+    Matrix(Vec<[f64; 4]>),
+}
+
+/// The binary form (the wire) is tagged; a scene file's is `"scanner"` or
+/// the rows.
+#[derive(Serialize, Deserialize)]
+enum TaggedTransform {
+    Scanner,
+    Matrix(Vec<[f64; 4]>),
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(untagged)]
+enum TextTransform {
+    Name(String),
+    Matrix(Vec<[f64; 4]>),
+}
+
+impl Serialize for LayerTransform {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match (s.is_human_readable(), self) {
+            (true, LayerTransform::Scanner) => TextTransform::Name("scanner".into()).serialize(s),
+            (true, LayerTransform::Matrix(m)) => TextTransform::Matrix(m.clone()).serialize(s),
+            (false, LayerTransform::Scanner) => TaggedTransform::Scanner.serialize(s),
+            (false, LayerTransform::Matrix(m)) => TaggedTransform::Matrix(m.clone()).serialize(s),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for LayerTransform {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        use serde::de::Error;
+        if !d.is_human_readable() {
+            return Ok(match TaggedTransform::deserialize(d)? {
+                TaggedTransform::Scanner => LayerTransform::Scanner,
+                TaggedTransform::Matrix(m) => LayerTransform::Matrix(m),
+            });
+        }
+        let expected = "\"scanner\" or an affine map's rows [a, b, c, t]";
+        match TextTransform::deserialize(d)
+            .map_err(|_| D::Error::custom(format!("expected {expected}")))?
+        {
+            TextTransform::Name(n) if n == "scanner" => Ok(LayerTransform::Scanner),
+            TextTransform::Name(n) => Err(D::Error::custom(format!(
+                "unknown transform \"{n}\": give {expected}"
+            ))),
+            TextTransform::Matrix(m) => Ok(LayerTransform::Matrix(m)),
+        }
+    }
 }
 
 impl Layer {
@@ -339,11 +398,14 @@ impl Layer {
         }
     }
 
-    /// The layer's `transform` as its linear part (rows) and translation:
-    /// layer space → scene volume space. `None` without one (or a malformed
-    /// one, which `Scene::load` refuses).
+    /// The layer's `transform` matrix as its linear part (rows) and
+    /// translation: layer space → scene volume space. `None` without one,
+    /// for `"scanner"` (the renderer composes the databases' geometry), or
+    /// for a malformed one (which `Scene::load` refuses).
     pub fn affine(&self) -> Option<([[f64; 3]; 3], [f64; 3])> {
-        let t = self.transform.as_ref()?;
+        let Some(LayerTransform::Matrix(t)) = &self.transform else {
+            return None;
+        };
         if !(3..=4).contains(&t.len()) {
             return None;
         }
@@ -461,7 +523,7 @@ fn check_layers(file: &Path, layers: &[Layer]) -> Result<()> {
                 l.opacity
             );
         }
-        if let Some(t) = &l.transform {
+        if let Some(LayerTransform::Matrix(t)) = &l.transform {
             check_transform(file, &format!("layer[{i}].transform"), t)?;
         }
         if let Some(v) = &l.view_opacity {
@@ -1025,7 +1087,19 @@ mod tests {
             assert_eq!(m, [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 2.0]]);
             assert_eq!(t, [5.0, 2.5, 0.0]);
         }
+        let text = format!("{head}{labels}transform = \"scanner\"\n");
+        let s = Scene::load(&write(d.path(), "s4.toml", &text)).unwrap();
+        assert_eq!(s.layers[0].transform, Some(LayerTransform::Scanner));
+        assert!(s.layers[0].affine().is_none());
         let cases = [
+            (
+                format!("{layer}transform = \"world\"\n"),
+                "unknown transform \"world\"",
+            ),
+            (
+                format!("{layer}transform = 3\n"),
+                "expected \"scanner\" or an affine map's rows",
+            ),
             (
                 format!("{layer}transform = [[1, 0, 0, 0], [0, 1, 0, 0]]\n"),
                 "layer[0].transform: an affine map is three rows",

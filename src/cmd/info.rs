@@ -37,11 +37,14 @@ pub fn run(a: Args) -> Result<()> {
                     v.axis, v.angles_deg[0], v.angles_deg[1]
                 ))
             );
-            if let Some((m, t)) = l.affine() {
-                println!(
-                    "transform:     layer space → the volume's: rows {:?}, translation {t:?}",
-                    m
-                );
+            match (&l.transform, l.affine()) {
+                (Some(parallax_common::config::LayerTransform::Scanner), _) => {
+                    println!("transform:     scanner (both databases' scanner geometry)")
+                }
+                (_, Some((m, t))) => println!(
+                    "transform:     layer space → the volume's: rows {m:?}, translation {t:?}"
+                ),
+                _ => {}
             }
             describe(&l.volume, a.verify).with_context(|| format!("layer[{i}].volume"))?;
         }

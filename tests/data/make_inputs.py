@@ -65,52 +65,79 @@ def write_nrrd(path, vol):
         f.write(vol.astype("<i2").tobytes())
 
 
+def slice_dataset(folder, name, series_uid, description, number, shape,
+                  orientation, position, bits_stored):
+    """One CT slice's dataset: the fields every series here shares."""
+    meta = FileMetaDataset()
+    meta.MediaStorageSOPClassUID = CTImageStorage
+    meta.MediaStorageSOPInstanceUID = generate_uid()
+    meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds = FileDataset(os.path.join(folder, name), {}, file_meta=meta,
+                     preamble=b"\0" * 128)
+    ds.SOPClassUID = CTImageStorage
+    ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
+    ds.StudyInstanceUID = "1.2.826.0.1.3680043.8.498.1"
+    ds.SeriesInstanceUID = series_uid
+    ds.SeriesDescription = description
+    ds.Modality = "CT"
+    ds.InstanceNumber = number
+    ds.Rows, ds.Columns = shape
+    ds.PixelSpacing = [SPACING[1], SPACING[0]]  # row spacing, column spacing
+    ds.SliceThickness = SPACING[2]
+    ds.ImageOrientationPatient = orientation
+    ds.ImagePositionPatient = position
+    ds.SamplesPerPixel = 1
+    ds.PhotometricInterpretation = "MONOCHROME2"
+    ds.BitsAllocated = 16
+    ds.BitsStored = bits_stored
+    ds.HighBit = bits_stored - 1
+    ds.PixelRepresentation = 0
+    ds.is_little_endian = True
+    ds.is_implicit_VR = False
+    return ds
+
+
 def write_series(folder, vol, series_uid, description, z_positions,
                  syntax=ExplicitVRLittleEndian, tilt=None, names=None):
     os.makedirs(folder, exist_ok=True)
-    study = "1.2.826.0.1.3680043.8.498.1"
     order = list(range(len(z_positions)))
     random.Random(3).shuffle(order)
     for n, k in enumerate(order):
-        meta = FileMetaDataset()
-        meta.MediaStorageSOPClassUID = CTImageStorage
-        meta.MediaStorageSOPInstanceUID = generate_uid()
-        meta.TransferSyntaxUID = ExplicitVRLittleEndian
         name = names[k] if names else "IM%04d" % n
-        ds = FileDataset(os.path.join(folder, name), {}, file_meta=meta,
-                         preamble=b"\0" * 128)
-        ds.SOPClassUID = CTImageStorage
-        ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
-        ds.StudyInstanceUID = study
-        ds.SeriesInstanceUID = series_uid
-        ds.SeriesDescription = description
-        ds.Modality = "CT"
-        ds.InstanceNumber = k + 1
-        ds.Rows, ds.Columns = NY, NX
-        ds.PixelSpacing = [SPACING[1], SPACING[0]]  # row spacing, column spacing
-        ds.SliceThickness = SPACING[2]
-        ds.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
-        ds.ImagePositionPatient = [-10.0, 20.0, z_positions[k]]
-        ds.SamplesPerPixel = 1
-        ds.PhotometricInterpretation = "MONOCHROME2"
-        ds.BitsAllocated = 16
-        ds.BitsStored = 12
-        ds.HighBit = 11
-        ds.PixelRepresentation = 0
+        ds = slice_dataset(folder, name, series_uid, description, k + 1, (NY, NX),
+                           [1, 0, 0, 0, 1, 0], [-10.0, 20.0, z_positions[k]], 12)
         ds.RescaleIntercept = -1024
         ds.RescaleSlope = 1
         if tilt is not None:
             ds.GantryDetectorTilt = tilt
         stored = (vol[min(k, vol.shape[0] - 1)].astype(np.int32) + 1024).astype(np.uint16)
         ds.PixelData = stored.tobytes()
-        ds.is_little_endian = True
-        ds.is_implicit_VR = False
         if syntax == RLELossless:
             ds.compress(RLELossless, stored)
         elif syntax != ExplicitVRLittleEndian:
             ds.file_meta.TransferSyntaxUID = syntax
             ds.PixelData = pydicom.encaps.encapsulate([b"\xff\x4f\xff\x51not a codestream"])
         ds.save_as(os.path.join(folder, name), write_like_original=False)
+
+
+def write_seg(folder, vol):
+    """A label series made on the CT `vol` by thresholds (1 from -500 HU, 2
+    from 500 HU: what `parallax import --labels-from-thresholds -500,500`
+    makes of the CT), on another grid: cropped to columns 1..23 and slices
+    2..15, its rows running to -x (ImageOrientationPatient [-1, 0, 0, 0, 1,
+    0], so its slice normal is -z and its slices are ordered from the top),
+    placed by its ImagePositionPatient where those voxels lie in the CT."""
+    os.makedirs(folder, exist_ok=True)
+    labels = (vol >= -500).astype(np.uint16) + (vol >= 500).astype(np.uint16)
+    k0, k1, i0, i1 = 2, 16, 1, 24
+    seg = labels[k0:k1, :, i0:i1][:, :, ::-1]  # column 0 is CT column i1 - 1
+    for n in range(seg.shape[0]):
+        position = [-10.0 + (i1 - 1) * SPACING[0], 20.0, 100.0 + (k0 + n) * SPACING[2]]
+        ds = slice_dataset(folder, "SEG%04d" % n, "1.2.826.0.1.3680043.8.498.20",
+                           "labels", n + 1, seg.shape[1:], [-1, 0, 0, 0, 1, 0],
+                           position, 16)
+        ds.PixelData = np.ascontiguousarray(seg[n]).tobytes()
+        ds.save_as(os.path.join(folder, "SEG%04d" % n), write_like_original=False)
 
 
 def nifti(dims, datatype=64, bitpix=64, vox_offset=352.0):
@@ -193,6 +220,7 @@ def main():
     write_series(os.path.join(out, "dicom-uneven"), vol, uid, "uneven", uneven)
     write_series(os.path.join(out, "dicom-tilt"), vol, uid, "tilt", z, tilt=2.0)
     write_series(os.path.join(out, "dicom-j2k"), vol[:2], uid, "j2k", z[:2], syntax=JPEG2000Lossless)
+    write_seg(os.path.join(out, "dicom-seg"), vol)
 
     tdir = os.path.join(out, "tiff")
     os.makedirs(tdir)

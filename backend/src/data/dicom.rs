@@ -324,6 +324,9 @@ pub struct DicomSource {
     slices: Vec<SliceMeta>,
     next: usize,
     description: String,
+    /// Volume space → LPS mm, from the first slice's position and the
+    /// orientation (`VolumeSource::world`).
+    world: [[f64; 4]; 3],
 }
 
 impl DicomSource {
@@ -374,12 +377,20 @@ pub fn open_dicom(dir: &Path, series: Option<&str>) -> Result<DicomSource> {
         normal.map(round6),
         p0.map(round6)
     );
+    // Voxel (i, j, k)'s centre: p0 + i·Δx·row + j·Δy·column + k·Δz·n.
+    let steps = [row, col, normal]
+        .iter()
+        .zip(info.spacing)
+        .map(|(d, s)| d.map(|c| c * s))
+        .collect::<Vec<_>>();
+    let world = super::world_from(p0, [steps[0], steps[1], steps[2]], info.spacing);
     let src = DicomSource {
         label,
         info,
         slices,
         next: 0,
         description,
+        world,
     };
     // Decode the first slice now: an unsupported transfer syntax is reported
     // before anything is written.
@@ -651,5 +662,9 @@ impl VolumeSource for DicomSource {
 
     fn describe(&self) -> Option<String> {
         Some(self.description.clone())
+    }
+
+    fn world(&self) -> Option<[[f64; 4]; 3]> {
+        Some(self.world)
     }
 }

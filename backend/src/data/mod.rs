@@ -439,6 +439,19 @@ impl Thresholded {
     }
 }
 
+/// The scanner geometry of a volume whose voxel (i, j, k) has its centre
+/// at `first + i·steps[0] + j·steps[1] + k·steps[2]` (LPS mm; `steps[a]`
+/// one voxel along axis a, its length the spacing): the affine map from
+/// volume space (data units from the first voxel's corner: voxel centres at
+/// (i + ½)·s) to LPS, three rows `[a, b, c, t]` (`VolumeSource::world`).
+pub fn world_from(first: [f64; 3], steps: [[f64; 3]; 3], spacing: [f64; 3]) -> [[f64; 4]; 3] {
+    std::array::from_fn(|r| {
+        let m: [f64; 3] = std::array::from_fn(|a| steps[a][r] / spacing[a]);
+        let t = first[r] - 0.5 * (steps[0][r] + steps[1][r] + steps[2][r]);
+        [m[0], m[1], m[2], t]
+    })
+}
+
 impl VolumeSource for Thresholded {
     fn info(&self) -> &VolumeInfo {
         &self.info
@@ -452,6 +465,10 @@ impl VolumeSource for Thresholded {
             }
         }
         Ok(())
+    }
+
+    fn world(&self) -> Option<[[f64; 4]; 3]> {
+        self.inner.world()
     }
 
     fn describe(&self) -> Option<String> {

@@ -188,12 +188,68 @@ pub fn open_nifti(path: &Path) -> Result<RawSource> {
     })?;
 
     let big_endian = h.endianness == Endianness::Big;
-    let mut src = RawSource::from_reader(label, info, big_endian, gz, reader);
+    let world = world(&h, spacing);
+    let mut src = RawSource::from_reader(label, info, big_endian, gz, reader).with_world(world);
     let (slope, inter) = (h.scl_slope as f64, h.scl_inter as f64);
     if slope.is_finite() && inter.is_finite() && slope != 0.0 && !(slope == 1.0 && inter == 0.0) {
         src = src.with_scale(slope, inter, scaled_type(stored, slope, inter));
     }
     Ok(src)
+}
+
+/// The scanner geometry of the header (`VolumeSource::world`): the sform
+/// where `sform_code` > 0, else the qform where `qform_code` > 0 (the
+/// NIfTI-1 standard's methods 3 and 2), turned from NIfTI's RAS into LPS;
+/// `None` without either, or where one is not finite or flattens the
+/// volume.
+fn world(h: &NiftiHeader, spacing: [f64; 3]) -> Option<[[f64; 4]; 3]> {
+    // Voxel (i, j, k)'s centre: first + i·steps[0] + j·steps[1] + k·steps[2] (RAS).
+    let (first, steps): ([f64; 3], [[f64; 3]; 3]) = if h.sform_code > 0 {
+        let rows = [h.srow_x, h.srow_y, h.srow_z].map(|r| r.map(f64::from));
+        (
+            [rows[0][3], rows[1][3], rows[2][3]],
+            std::array::from_fn(|a| [rows[0][a], rows[1][a], rows[2][a]]),
+        )
+    } else if h.qform_code > 0 {
+        let [b, c, d] = [h.quatern_b, h.quatern_c, h.quatern_d].map(f64::from);
+        let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
+        let r = [
+            [
+                a * a + b * b - c * c - d * d,
+                2.0 * (b * c - a * d),
+                2.0 * (b * d + a * c),
+            ],
+            [
+                2.0 * (b * c + a * d),
+                a * a + c * c - b * b - d * d,
+                2.0 * (c * d - a * b),
+            ],
+            [
+                2.0 * (b * d - a * c),
+                2.0 * (c * d + a * b),
+                a * a + d * d - c * c - b * b,
+            ],
+        ];
+        let qfac = if h.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+        let scale = [spacing[0], spacing[1], qfac * spacing[2]];
+        (
+            [h.quatern_x, h.quatern_y, h.quatern_z].map(f64::from),
+            std::array::from_fn(|a| std::array::from_fn(|row| r[row][a] * scale[a])),
+        )
+    } else {
+        return None;
+    };
+    let lps = |v: [f64; 3]| [-v[0], -v[1], v[2]];
+    let (first, steps) = (lps(first), steps.map(lps));
+    let w = super::world_from(first, steps, spacing);
+    let ok = w.as_flattened().iter().all(|x| x.is_finite())
+        && crate::loader::Affine {
+            m: std::array::from_fn(|r| [w[r][0], w[r][1], w[r][2]]),
+            t: [w[0][3], w[1][3], w[2][3]],
+        }
+        .inverse()
+        .is_some();
+    ok.then_some(w)
 }
 
 #[cfg(test)]
@@ -256,6 +312,69 @@ mod tests {
         } else {
             std::fs::write(path, bytes).unwrap();
         }
+    }
+
+    /// Where voxel (i, j, k)'s centre lands under `w` (volume space: the
+    /// centre at (i + ½)·s).
+    fn centre(w: &[[f64; 4]; 3], ijk: [f64; 3], s: [f64; 3]) -> [f64; 3] {
+        let p: [f64; 3] = std::array::from_fn(|a| (ijk[a] + 0.5) * s[a]);
+        std::array::from_fn(|r| w[r][0] * p[0] + w[r][1] * p[1] + w[r][2] * p[2] + w[r][3])
+    }
+
+    /// NIfTI-1's methods 3 (sform) and 2 (qform), turned from RAS to LPS;
+    /// none without a code.
+    #[test]
+    fn the_sform_or_the_qform_places_the_volume_in_lps() {
+        let sp = [0.5, 0.5, 2.0];
+        let mut h = NiftiHeader {
+            sform_code: 0,
+            qform_code: 0,
+            ..Default::default()
+        };
+        assert_eq!(world(&h, sp), None);
+        h.sform_code = 1;
+        h.srow_x = [-0.5, 0.0, 0.0, 90.0];
+        h.srow_y = [0.0, 0.5, 0.0, -126.0];
+        h.srow_z = [0.0, 0.0, 2.0, -72.0];
+        let w = world(&h, sp).unwrap();
+        for ijk in [[0.0, 0.0, 0.0], [3.0, 5.0, 7.0]] {
+            let ras = [
+                -0.5 * ijk[0] + 90.0,
+                0.5 * ijk[1] - 126.0,
+                2.0 * ijk[2] - 72.0,
+            ];
+            let lps = centre(&w, ijk, sp);
+            let want = [-ras[0], -ras[1], ras[2]];
+            assert!(
+                (0..3).all(|k| (lps[k] - want[k]).abs() < 1e-9),
+                "{lps:?} {want:?}"
+            );
+        }
+        // The qform: 180° about z (quaternion (0, 0, 1)), qfac −1.
+        h.sform_code = 0;
+        h.qform_code = 1;
+        h.quatern_d = 1.0;
+        h.quatern_x = 10.0;
+        h.quatern_y = 20.0;
+        h.quatern_z = 30.0;
+        h.pixdim = [-1.0, 0.5, 0.5, 2.0, 0.0, 0.0, 0.0, 0.0];
+        let w = world(&h, sp).unwrap();
+        let ijk = [2.0, 4.0, 6.0];
+        let ras = [
+            10.0 - 0.5 * ijk[0],
+            20.0 - 0.5 * ijk[1],
+            30.0 - 2.0 * ijk[2],
+        ];
+        let lps = centre(&w, ijk, sp);
+        let want = [-ras[0], -ras[1], ras[2]];
+        assert!(
+            (0..3).all(|k| (lps[k] - want[k]).abs() < 1e-9),
+            "{lps:?} {want:?}"
+        );
+        // A flattening sform is no geometry.
+        h.sform_code = 1;
+        h.srow_z = [0.0; 4];
+        assert_eq!(world(&h, sp), None);
     }
 
     #[test]

@@ -44,6 +44,8 @@ pub struct RawSource {
     values_read: u64,
     /// NaN means "no data" (`--nan empty`).
     nan_empty: bool,
+    /// The scanner geometry the header gave (`VolumeSource::world`).
+    world: Option<[[f64; 4]; 3]>,
 }
 
 impl RawSource {
@@ -72,7 +74,14 @@ impl RawSource {
             text: false,
             values_read: 0,
             nan_empty: false,
+            world: None,
         }
+    }
+
+    /// The volume's place in the scanner's patient space (LPS mm).
+    pub fn with_world(mut self, world: Option<[[f64; 4]; 3]>) -> Self {
+        self.world = world;
+        self
     }
 
     /// Applies `value = slope · stored + inter` to every sample and reports
@@ -189,6 +198,10 @@ impl VolumeSource for RawSource {
 
     fn set_nan_empty(&mut self) {
         self.nan_empty = true;
+    }
+
+    fn world(&self) -> Option<[[f64; 4]; 3]> {
+        self.world
     }
 
     fn conversion_note(&self) -> Option<String> {

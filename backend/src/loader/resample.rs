@@ -35,6 +35,17 @@ impl Affine {
         })
     }
 
+    /// The map `self ∘ first` (first `first`, then `self`).
+    pub fn compose(&self, first: &Affine) -> Affine {
+        let m = std::array::from_fn(|r| {
+            std::array::from_fn(|c| (0..3).map(|k| self.m[r][k] * first.m[k][c]).sum())
+        });
+        Affine {
+            m,
+            t: self.apply(first.t),
+        }
+    }
+
     /// The inverse map; `None` where the linear part is singular.
     pub fn inverse(&self) -> Option<Affine> {
         let m = &self.m;
@@ -395,6 +406,11 @@ mod tests {
             t: [0.0; 3],
         };
         assert!(flat.inverse().is_none());
+        let both = inv.compose(&a);
+        for p in [[2.0, -3.0, 0.5], [0.0, 9.0, 1.0]] {
+            let q = both.apply(p);
+            assert!((0..3).all(|k| (q[k] - p[k]).abs() < 1e-12), "{p:?} → {q:?}");
+        }
         let (lo, hi) = a.map_box([0.0; 3], [1.0; 3]);
         assert_eq!(lo, [2.0, -1.0, 2.5]);
         assert_eq!(hi, [4.0, 0.5, 5.5]);

@@ -31,14 +31,17 @@ pub const FOOTER_MAGIC: [u8; 8] = *b"PXOEND\0\0";
 /// a brick is uploaded); format 5 records which axes each level halves
 /// (`OctreeLayout::splits`: levels over thick slices halve only the finer
 /// axes; formats 1–4 are isotropic octrees); format 6 records a label
-/// volume's labels in the import summary (`Summary::labels`).
-pub const VERSION: u32 = 6;
+/// volume's labels in the import summary (`Summary::labels`); format 7
+/// records the scanner geometry the importer read (`Summary::world`).
+pub const VERSION: u32 = 7;
 /// The first format whose bricks carry their macrocell ranges.
 pub const CELLS_VERSION: u32 = 4;
 /// The first format whose levels may halve only some axes.
 pub const SPLITS_VERSION: u32 = 5;
 /// The first format whose summary may list a label volume's labels.
 pub const LABELS_VERSION: u32 = 6;
+/// The first format whose summary may hold the scanner geometry.
+pub const WORLD_VERSION: u32 = 7;
 /// The oldest format read.
 pub const OLDEST_VERSION: u32 = 1;
 /// Bytes before the header: magic, version, header length, header CRC.
@@ -150,6 +153,14 @@ pub struct Summary {
     /// labels (`store::import`), so a colour table can be checked against
     /// them before anything is drawn. `None`: a volume of values.
     pub labels: Option<Vec<u32>>,
+    /// Where the volume lies in the scanner's patient space, as the source
+    /// file says (DICOM, NIfTI's sform or qform, NRRD's space): the affine
+    /// map, three rows `[a, b, c, t]`, from volume space (data units from
+    /// the first voxel's corner) to patient coordinates in LPS millimetres
+    /// (DICOM's frame: x to the patient's left, y posterior, z superior).
+    /// A layer placed by `transform = "scanner"` uses its own and the scene
+    /// volume's. `None`: the source has none.
+    pub world: Option<[[f64; 4]; 3]>,
 }
 
 /// The most distinct labels a label volume may hold.
@@ -176,6 +187,43 @@ impl TrailerV5 {
     /// The same trailer in this build's terms (a volume of values).
     pub fn upgrade(self) -> Trailer {
         let s = self.summary;
+        TrailerV6 {
+            nodes: self.nodes,
+            summary: SummaryV6 {
+                value_min: s.value_min,
+                value_max: s.value_max,
+                quant_rms: s.quant_rms,
+                quant_max: s.quant_max,
+                quant_samples: s.quant_samples,
+                labels: None,
+            },
+        }
+        .upgrade()
+    }
+}
+
+/// The summary of format 6 (labels, no scanner geometry).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SummaryV6 {
+    pub value_min: f32,
+    pub value_max: f32,
+    pub quant_rms: f64,
+    pub quant_max: f64,
+    pub quant_samples: u64,
+    pub labels: Option<Vec<u32>>,
+}
+
+/// The trailer of format 6.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrailerV6 {
+    pub nodes: Vec<NodeRecord>,
+    pub summary: SummaryV6,
+}
+
+impl TrailerV6 {
+    /// The same trailer in this build's terms (no scanner geometry).
+    pub fn upgrade(self) -> Trailer {
+        let s = self.summary;
         Trailer {
             nodes: self.nodes,
             summary: Summary {
@@ -184,7 +232,8 @@ impl TrailerV5 {
                 quant_rms: s.quant_rms,
                 quant_max: s.quant_max,
                 quant_samples: s.quant_samples,
-                labels: None,
+                labels: s.labels,
+                world: None,
             },
         }
     }

@@ -90,6 +90,7 @@ pub fn import(
 ) -> Result<ImportReport> {
     let start = Instant::now();
     let info = src.info().clone();
+    let world = src.world();
     if !(4..=256).contains(&opts.brick) {
         bail!(
             "--brick {}: the brick size must be between 4 and 256",
@@ -221,6 +222,7 @@ pub fn import(
         quant_max: sink.quant_max,
         quant_samples: sink.quant_n,
         labels: opts.labels.then(|| labels.into_iter().collect()),
+        world,
     };
     let (stored, empty) = (sink.stored, sink.empty);
     let file_bytes = writer.finish(summary.clone())?;

@@ -42,6 +42,16 @@ pub fn describe(db: &OctreeDb) -> String {
         h.info.spacing[0], h.info.spacing[1], h.info.spacing[2]
     );
     let _ = writeln!(o, "value range:   {} … {}", s.value_min, s.value_max);
+    if let Some(w) = &s.world {
+        let r = |k: usize| w[k].map(|x| (x * 1e4).round() / 1e4);
+        let _ = writeln!(
+            o,
+            "scanner:       volume space → patient LPS mm: rows {:?} {:?} {:?}",
+            r(0),
+            r(1),
+            r(2)
+        );
+    }
     if let Some(l) = &s.labels {
         let _ = writeln!(o, "labels:        {}", label_list(l));
     }

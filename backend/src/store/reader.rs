@@ -5,9 +5,9 @@
 use super::cells::{self, Brick};
 use super::codec::{self, BrickEncoding, Framing};
 use super::format::{
-    bincode_config, Footer, Header, HeaderV4, NodeRecord, Summary, Trailer, TrailerV5,
+    bincode_config, Footer, Header, HeaderV4, NodeRecord, Summary, Trailer, TrailerV5, TrailerV6,
     CELLS_VERSION, FOOTER_LEN, LABELS_VERSION, MAGIC, MAX_LABELS, OLDEST_VERSION, PREAMBLE_LEN,
-    SPLITS_VERSION, VERSION,
+    SPLITS_VERSION, VERSION, WORLD_VERSION,
 };
 use super::layout::{NodeKey, OctreeLayout};
 use anyhow::{bail, Context, Result};
@@ -96,10 +96,15 @@ impl OctreeDb {
         if crc32fast::hash(&tbytes) != footer.trailer_crc {
             bail!("{name}: node table checksum mismatch (corrupt node table)");
         }
-        let trailer: Trailer = if version >= LABELS_VERSION {
+        let trailer: Trailer = if version >= WORLD_VERSION {
             bincode::serde::decode_from_slice(&tbytes, bincode_config())
                 .with_context(|| format!("{name}: corrupt node table"))?
                 .0
+        } else if version >= LABELS_VERSION {
+            let (old, _): (TrailerV6, usize) =
+                bincode::serde::decode_from_slice(&tbytes, bincode_config())
+                    .with_context(|| format!("{name}: corrupt node table"))?;
+            old.upgrade()
         } else {
             let (old, _): (TrailerV5, usize) =
                 bincode::serde::decode_from_slice(&tbytes, bincode_config())

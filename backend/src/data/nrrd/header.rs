@@ -41,6 +41,48 @@ pub struct NrrdHeader {
     /// Bytes to skip before the data (of the decompressed stream for gzip);
     /// −1 (raw only) means the data is the last bytes of the file.
     pub byte_skip: i64,
+    /// Volume space → LPS mm, from `space`, `space directions` and `space
+    /// origin` where the header has all three in a patient space (LPS, RAS
+    /// or LAS); `None` otherwise (`VolumeSource::world`).
+    pub world: Option<[[f64; 4]; 3]>,
+}
+
+/// The scanner geometry of a header's `space`, `space directions` (of the
+/// kept axes) and `space origin` (the first voxel's centre), in LPS.
+/// `None` where one is missing, the space is not a patient space or not
+/// three-dimensional, or a value is malformed (the spacing's own checks
+/// name those).
+fn world_of(label: &str, f: &Fields, keep: &[usize], spacing: [f64; 3]) -> Option<[[f64; 4]; 3]> {
+    // Which LPS axes the space's axes run against.
+    let flip = match f.space.as_deref()?.trim().to_ascii_lowercase().as_str() {
+        "left-posterior-superior" | "lps" => [1.0, 1.0, 1.0],
+        "right-anterior-superior" | "ras" => [-1.0, -1.0, 1.0],
+        "left-anterior-superior" | "las" => [1.0, -1.0, 1.0],
+        _ => return None,
+    };
+    let vectors = space_vectors(label, f.directions.as_deref()?).ok()?;
+    let origin: Vec<f64> = f
+        .origin
+        .as_deref()?
+        .trim()
+        .trim_start_matches('(')
+        .trim_end_matches(')')
+        .split(',')
+        .map(|c| c.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .ok()?;
+    if origin.len() != 3 {
+        return None;
+    }
+    let lps = |v: &[f64]| -> Option<[f64; 3]> {
+        (v.len() == 3).then(|| std::array::from_fn(|k| flip[k] * v[k]))
+    };
+    let mut steps = [[0.0; 3]; 3];
+    for (a, &axis) in keep.iter().enumerate() {
+        steps[a] = lps(vectors.get(axis)?.as_deref()?)?;
+    }
+    let w = super::super::world_from(lps(&origin)?, steps, spacing);
+    w.as_flattened().iter().all(|x| x.is_finite()).then_some(w)
 }
 
 /// NRRD `type` names of the supported sample types (every spelling teem
@@ -94,6 +136,14 @@ fn parse_encoding(label: &str, value: &str) -> Result<NrrdEncoding> {
 /// Parses `space directions`: one `(x,y,z)` vector or `none` per axis.
 /// Returns the vector norms (`None` for `none`).
 fn parse_space_directions(label: &str, value: &str) -> Result<Vec<Option<f64>>> {
+    Ok(space_vectors(label, value)?
+        .into_iter()
+        .map(|v| v.map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt()))
+        .collect())
+}
+
+/// The vectors of `space directions` (`None` for `none`).
+fn space_vectors(label: &str, value: &str) -> Result<Vec<Option<Vec<f64>>>> {
     let mut out = Vec::new();
     let mut rest = value.trim();
     while !rest.is_empty() {
@@ -101,14 +151,14 @@ fn parse_space_directions(label: &str, value: &str) -> Result<Vec<Option<f64>>> 
             let Some(end) = after.find(')') else {
                 bail!("{label}: space directions: missing ')' in '{value}'");
             };
-            let mut sq = 0.0f64;
+            let mut v = Vec::new();
             for c in after[..end].split(',') {
                 let x: f64 = c.trim().parse().map_err(|_| {
                     anyhow::anyhow!("{label}: space directions: '{}' is not a number", c.trim())
                 })?;
-                sq += x * x;
+                v.push(x);
             }
-            out.push(Some(sq.sqrt()));
+            out.push(Some(v));
             rest = after[end + 1..].trim_start();
         } else {
             let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
@@ -161,6 +211,8 @@ struct Fields {
     endian: Option<String>,
     spacings: Option<String>,
     directions: Option<String>,
+    space: Option<String>,
+    origin: Option<String>,
     data_file: Option<String>,
     byte_skip: Option<String>,
     line_skip: Option<String>,
@@ -199,10 +251,12 @@ fn read_fields(r: &mut BufReader<File>, consumed: &mut u64, label: &str) -> Resu
             "endian" => f.endian = value,
             "spacings" => f.spacings = value,
             "space directions" => f.directions = value,
+            "space" => f.space = value,
+            "space origin" => f.origin = value,
             "data file" | "datafile" => f.data_file = value,
             "byte skip" | "byteskip" => f.byte_skip = value,
             "line skip" | "lineskip" => f.line_skip = value,
-            _ => {} // content, kinds, space, space origin, units, …: not needed here
+            _ => {} // content, kinds, units, …: not needed here
         }
     }
     Ok(f)
@@ -396,6 +450,7 @@ pub fn read_header(path: &Path) -> Result<(NrrdHeader, BufReader<File>, u64)> {
     check_info(&label, &info, "sizes", spacing_field)?;
     let (byte_skip, line_skip) = skips(&label, &f, encoding)?;
     let data_file = data_file_of(&label, path, &f)?;
+    let world = world_of(&label, &f, &keep, spacing);
     Ok((
         NrrdHeader {
             info,
@@ -404,6 +459,7 @@ pub fn read_header(path: &Path) -> Result<(NrrdHeader, BufReader<File>, u64)> {
             data_file,
             line_skip,
             byte_skip,
+            world,
         },
         r,
         consumed,

@@ -30,6 +30,17 @@ pub use writer::NrrdWriter;
 /// Opens a NRRD volume (attached or detached header) for streaming.
 pub fn open_nrrd(path: &Path) -> Result<RawSource> {
     let (header, attached, header_len) = read_header(path)?;
+    let world = header.world;
+    Ok(open_data(path, header, attached, header_len)?.with_world(world))
+}
+
+/// The data of a NRRD whose header `read_header` read.
+fn open_data(
+    path: &Path,
+    header: NrrdHeader,
+    attached: BufReader<File>,
+    header_len: u64,
+) -> Result<RawSource> {
     let info = header.info.clone();
     let (label, mut reader, mut pos) = match &header.data_file {
         None => (path.display().to_string(), attached, header_len),

@@ -519,3 +519,47 @@ mod ascii {
         }
     }
 }
+
+/// `space`, `space directions` and `space origin` give the scanner
+/// geometry in LPS (a RAS space's x and y turned); a space that is not a
+/// patient's, or no origin, gives none.
+#[test]
+fn the_space_fields_place_the_volume_in_lps() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, space: &str, origin: &str| {
+        let p = dir.path().join(name);
+        let mut bytes = format!(
+            "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\n{space}\
+             space directions: (0,0.5,0) (-0.5,0,0) (0,0,2)\n{origin}encoding: raw\n\n"
+        )
+        .into_bytes();
+        bytes.extend([0u8; 8]);
+        fs::write(&p, bytes).unwrap();
+        open_nrrd(&p).unwrap().world()
+    };
+    let w = write(
+        "ras.nrrd",
+        "space: right-anterior-superior\n",
+        "space origin: (10, 20, 30)\n",
+    )
+    .unwrap();
+    // Voxel (1, 1, 1)'s centre: origin + each axis's direction, in RAS.
+    let s = [0.5, 0.5, 2.0];
+    let p: [f64; 3] = std::array::from_fn(|a| 1.5 * s[a]);
+    let lps: [f64; 3] =
+        std::array::from_fn(|r| w[r][0] * p[0] + w[r][1] * p[1] + w[r][2] * p[2] + w[r][3]);
+    let ras = [10.0 - 0.5, 20.0 + 0.5, 30.0 + 2.0];
+    assert!(
+        (0..3).all(|k| (lps[k] - [-ras[0], -ras[1], ras[2]][k]).abs() < 1e-12),
+        "{lps:?}"
+    );
+    assert_eq!(
+        write(
+            "none.nrrd",
+            "space: scanner-xyz\n",
+            "space origin: (1,2,3)\n"
+        ),
+        None
+    );
+    assert_eq!(write("noorigin.nrrd", "space: LPS\n", ""), None);
+}
