@@ -32,6 +32,10 @@ pub struct LayerPoint {
     /// bit for bit.
     pub rmse: f64,
     pub equal: bool,
+    /// From a cold renderer to the converged frame (reads, uploads and
+    /// frames; a placed layer's resampling is in it), and the bytes read.
+    pub converge_ms: f64,
+    pub bytes_read: u64,
 }
 
 /// Writes `tf` into `dir` as `name` and returns the path.
@@ -129,11 +133,14 @@ pub fn run(
     ];
     let mut renderers = Vec::new();
     let mut images = Vec::new();
+    let mut loads = Vec::new();
     for (_, tf, layers, cfg, _) in &cases {
+        let t = std::time::Instant::now();
         let mut r =
             Renderer::with_layers(shot.db, layers, cfg, &AdapterRequest::from_env(None, 0))?;
         r.set_transfer_function(1, tf)?;
         let f = r.converge(shot.placement, &[*shot.view], cfg, measure::CONVERGE_FRAMES)?;
+        loads.push((t.elapsed().as_secs_f64() * 1e3, f.stats.bytes_read));
         images.push(f.images.into_iter().next().expect("one view"));
         renderers.push(r);
     }
@@ -167,6 +174,8 @@ pub fn run(
                 .iter()
                 .zip(&images[*b])
                 .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)),
+            converge_ms: loads[i].0,
+            bytes_read: loads[i].1,
         });
     }
     Ok(points)
@@ -175,13 +184,23 @@ pub fn run(
 /// The table on stdout.
 pub fn print(points: &[LayerPoint]) {
     println!(
-        "{:<62} {:>6} {:>10} {:>8} {:>10} {:>6}",
-        "case", "layers", "render ms", "ratio", "RMSE", "equal"
+        "{:<62} {:>6} {:>10} {:>8} {:>10} {:>6} {:>12} {:>9}",
+        "case", "layers", "render ms", "ratio", "RMSE", "equal", "converge ms", "MB read"
     );
     for p in points {
+        let LayerPoint {
+            name,
+            drawn,
+            render_ms: ms,
+            time_ratio: ratio,
+            rmse,
+            equal,
+            converge_ms: cold,
+            ..
+        } = p;
+        let mb = p.bytes_read as f64 / 1e6;
         println!(
-            "{:<62} {:>6} {:>10.1} {:>8.2} {:>10.2e} {:>6}",
-            p.name, p.drawn, p.render_ms, p.time_ratio, p.rmse, p.equal
+            "{name:<62} {drawn:>6} {ms:>10.1} {ratio:>8.2} {rmse:>10.2e} {equal:>6} {cold:>12.0} {mb:>9.1}"
         );
     }
 }
@@ -190,11 +209,19 @@ pub fn print(points: &[LayerPoint]) {
 pub fn write_csv(path: &Path, points: &[LayerPoint]) -> Result<()> {
     write_table(
         path,
-        "case,against,layers_drawn,render_ms,time_ratio,rmse_vs_volume,equal",
+        "case,against,layers_drawn,render_ms,time_ratio,rmse_vs_volume,equal,converge_ms,bytes_read",
         points.iter().map(|p| {
             format!(
-                "{},{},{},{:.3},{:.3},{:.3e},{}",
-                p.name, p.against, p.drawn, p.render_ms, p.time_ratio, p.rmse, p.equal
+                "{},{},{},{:.3},{:.3},{:.3e},{},{:.1},{}",
+                p.name,
+                p.against,
+                p.drawn,
+                p.render_ms,
+                p.time_ratio,
+                p.rmse,
+                p.equal,
+                p.converge_ms,
+                p.bytes_read
             )
         }),
     )

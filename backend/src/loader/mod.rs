@@ -290,7 +290,12 @@ impl Loader {
             .collect();
         let channels = 1 + layers.len() as u64;
         let brick_bytes = (layout.stored_len() * std::mem::size_of::<f32>()) as u64 * channels;
-        let l2_bricks = (cfg.cpu_budget_bytes / brick_bytes.max(1)).min(usize::MAX as u64) as usize;
+        // Each placed layer keeps the decoded bricks it read last, out of
+        // the one CPU budget.
+        let recent = (cfg.cpu_budget_bytes / resample::RECENT_SHARE).min(resample::RECENT_MOST);
+        let placed = layers.iter().filter(|l| l.transform.is_some()).count() as u64;
+        let l2_budget = cfg.cpu_budget_bytes - placed * recent;
+        let l2_bricks = (l2_budget / brick_bytes.max(1)).min(usize::MAX as u64) as usize;
         let slots = cfg.gpu_slots.min(NO_SLOT);
         let sources = Arc::new(
             std::iter::once(Source {
@@ -306,6 +311,7 @@ impl Loader {
                         db.header.info.spacing,
                         t,
                         l.nearest,
+                        recent,
                     )
                     .expect("an invertible layer transform (the renderer checks it)")
                 }),
@@ -318,7 +324,7 @@ impl Loader {
         Loader {
             sources,
             layer_ranges,
-            l2: ByteLru::new(cfg.cpu_budget_bytes),
+            l2: ByteLru::new(l2_budget),
             gpu: SlotPool::new(slots),
             io,
             db,

@@ -14,8 +14,9 @@
 //! those only the ones its transfer function sees; outside the layer's box
 //! there is no data (the pool gives it the layer's smallest value).
 
+use super::cache::ByteLru;
 use super::ranges::SubtreeRanges;
-use crate::store::{NodeKey, OctreeDb, OctreeLayout, OVERLAP};
+use crate::store::{Brick, NodeKey, OctreeDb, OctreeLayout, OVERLAP};
 use anyhow::Result;
 use parallax_common::tf::EmptinessTable;
 use std::collections::HashMap;
@@ -120,7 +121,16 @@ pub(crate) struct Placed {
     /// Per volume level, the layer level its bricks are resampled from.
     level_of: Vec<u32>,
     covers: Mutex<HashMap<NodeKey, Cover>>,
+    /// The layer's decoded bricks read last (a layer brick serves the
+    /// several volume nodes it overlaps, which the loader asks for close
+    /// together); its bytes are taken from the loader's CPU budget.
+    recent: Mutex<ByteLru>,
 }
+
+/// The share of the CPU cache budget a placed layer's own cache of decoded
+/// bricks takes (`Placed::recent`), and its most.
+pub(crate) const RECENT_SHARE: u64 = 16;
+pub(crate) const RECENT_MOST: u64 = 64 << 20;
 
 impl Placed {
     /// The layer `db` placed by `to_volume` (layer space → the volume's)
@@ -132,6 +142,7 @@ impl Placed {
         vol_spacing: [f64; 3],
         to_volume: Affine,
         nearest: bool,
+        recent_bytes: u64,
     ) -> Option<Self> {
         let to_layer = to_volume.inverse()?;
         let lay = *db.layout();
@@ -163,6 +174,7 @@ impl Placed {
             nearest,
             level_of,
             covers: Mutex::new(HashMap::new()),
+            recent: Mutex::new(ByteLru::new(recent_bytes)),
         })
     }
 
@@ -298,9 +310,32 @@ impl Placed {
             let values = if empty.is_empty(rec.min as f64, rec.max as f64) {
                 None
             } else {
-                bytes += rec.len as u64;
                 read_any = true;
-                self.db.read_brick(bk)?
+                let cached = self
+                    .recent
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .get(bk);
+                match cached {
+                    Some(b) => Some(b),
+                    None => {
+                        bytes += rec.len as u64;
+                        let read = self.db.read_brick(bk)?.map(|values| {
+                            Arc::new(Brick {
+                                values,
+                                cells: None,
+                                layered: None,
+                            })
+                        });
+                        if let Some(b) = &read {
+                            self.recent
+                                .lock()
+                                .unwrap_or_else(|e| e.into_inner())
+                                .insert(bk, b.clone());
+                        }
+                        read
+                    }
+                }
             };
             let c = bk.coords().map(|v| v as i64 * b);
             let from: [i64; 3] = std::array::from_fn(|a| c[a].max(lo[a]));
@@ -313,7 +348,7 @@ impl Placed {
                         dense[d] = match &values {
                             Some(v) => {
                                 let s = |g: i64, a: usize| g - c[a] + OVERLAP as i64;
-                                v[((s(z, 2) * side + s(y, 1)) * side + s(x, 0)) as usize]
+                                v.values[((s(z, 2) * side + s(y, 1)) * side + s(x, 0)) as usize]
                             }
                             None => rec.min,
                         };
