@@ -582,9 +582,24 @@ fn a_layers_share_at_two_eyes_follows_the_smoothstep() {
     );
 }
 
+/// `volume` as a layer through `tf`, placed by a scale, a turn about z
+/// (degrees) and a translation.
+fn placed(volume: &Path, tf: &Path, scale: f64, turn: f64, t: [f64; 3]) -> Layer {
+    let (s, c) = turn.to_radians().sin_cos();
+    Layer {
+        transform: Some(LayerTransform::Matrix(vec![
+            [scale * c, -scale * s, 0.0, t[0]],
+            [scale * s, scale * c, 0.0, t[1]],
+            [0.0, 0.0, scale, t[2]],
+        ])),
+        ..layer(volume, tf)
+    }
+}
+
 /// Numerical stability with layers: a constant volume, layers of huge
 /// (1e6) and tiny (1e-9) extinction, a delta-like function, NaN voxels (no
-/// data) in a layer, and a view opacity with equal angles — every pixel
+/// data) in a layer, a view opacity with equal angles, and placed layers
+/// turned, shrunk to a speck and blown up past the volume — every pixel
 /// finite, in [0, 1], and a tiny layer changes the volume's image by no
 /// more than its extinction can.
 #[test]
@@ -643,6 +658,20 @@ fn extreme_layers_stay_finite() {
                 ..layer(&a, &huge)
             }],
         ),
+        // Placed layers: turned 30° and halved, a speck (1/1000 of its
+        // size), and one blown up so that the volume is inside one voxel.
+        (
+            "placed, turned",
+            vec![placed(&b, &huge, 0.5, 30.0, [8.0, 2.0, 5.0])],
+        ),
+        (
+            "placed, a speck",
+            vec![placed(&b, &huge, 1e-3, 0.0, [16.0; 3])],
+        ),
+        (
+            "placed, huge",
+            vec![placed(&b, &huge, 1e3, 10.0, [-16000.0; 3])],
+        ),
     ];
     for (name, layers) in cases {
         let (f, _) = render(&a, &layers, &base, &placement, &[view], &cfg);
@@ -658,6 +687,11 @@ fn extreme_layers_stay_finite() {
         println!("{name}: finite, in [0, 1]; against the volume alone RMSE {rmse:.2e}, max {max:.2e}, mean opacity {:.3}", support::mean_alpha(img));
         if name == "tiny" {
             assert!(max < 1e-6, "a 1e-9 layer: {max:.2e}");
+        }
+        // Smaller than a voxel, the speck reaches no voxel centre: outside
+        // its box a placed layer is no medium.
+        if name == "placed, a speck" {
+            assert!(max < 1e-6, "a speck: {max:.2e}");
         }
         if name == "huge" || name == "equal angles" {
             assert!(support::mean_alpha(img) > support::mean_alpha(&alone.images[0]));

@@ -26,6 +26,19 @@
 #import bindings
 #import preint
 
+// A layer placed by a transform (`[[layer]] transform`, resampled onto the
+// volume's bricks: backend/src/loader/resample.rs) has voxels outside its
+// box, where it is no medium at all: they hold NO_LAYER (−3e38, f32 pools
+// only), and a value interpolated from one is below NO_LAYER_BELOW (any
+// weight of 1e-18 or more puts it there), so the layer adds nothing to a
+// segment with such an end. Data never comes near these values.
+const NO_LAYER_BELOW: f32 = -1.0e20;
+
+// Whether a layer has data at both ends of a segment.
+fn layer_at(a: f32, b: f32) -> bool {
+    return a > NO_LAYER_BELOW && b > NO_LAYER_BELOW;
+}
+
 var<private> layer_p: array<LayerParams, 3>;
 // Each layer's share of τ̄ in the last segment (`layered_average`), for
 // MImDA's combined importance.
@@ -203,21 +216,21 @@ fn layered_average(vol: vec4<f32>, ls: LayerSeg, w: vec3<f32>) -> vec4<f32> {
     if (MIMDA) {
         layer_tau = vec3<f32>(0.0);
     }
-    if (LAYERS > 0u && (ls.mask & 2u) != 0u && w.x > 0.0) {
+    if (LAYERS > 0u && (ls.mask & 2u) != 0u && w.x > 0.0 && layer_at(ls.a.x, ls.b.x)) {
         let t = w.x * layer_term(0u, ls.a.x, ls.b.x, ls.ea[0], ls.eb[0]);
         if (MIMDA) {
             layer_tau.x = t.x;
         }
         sum = sum + t;
     }
-    if (LAYERS > 1u && (ls.mask & 4u) != 0u && w.y > 0.0) {
+    if (LAYERS > 1u && (ls.mask & 4u) != 0u && w.y > 0.0 && layer_at(ls.a.y, ls.b.y)) {
         let t = w.y * layer_term(1u, ls.a.y, ls.b.y, ls.ea[1], ls.eb[1]);
         if (MIMDA) {
             layer_tau.y = t.x;
         }
         sum = sum + t;
     }
-    if (LAYERS > 2u && (ls.mask & 8u) != 0u && w.z > 0.0) {
+    if (LAYERS > 2u && (ls.mask & 8u) != 0u && w.z > 0.0 && layer_at(ls.a.z, ls.b.z)) {
         let t = w.z * layer_term(2u, ls.a.z, ls.b.z, ls.ea[2], ls.eb[2]);
         if (MIMDA) {
             layer_tau.z = t.x;

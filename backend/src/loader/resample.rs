@@ -12,7 +12,7 @@
 //! edge (so a layer keeps at least the volume's detail at every level).
 //! Only the layer's bricks that the node's voxels reach are read, and of
 //! those only the ones its transfer function sees; outside the layer's box
-//! there is no data (the pool gives it the layer's smallest value).
+//! there is no medium ([`NO_LAYER`]).
 
 use super::cache::ByteLru;
 use super::ranges::SubtreeRanges;
@@ -102,6 +102,12 @@ pub(crate) struct Cover {
     pub culled: bool,
     pub needs_data: bool,
 }
+
+/// A placed layer's value where it has no data (outside its box, or a
+/// brick it does not store): no medium at all in the kernel
+/// (shaders/shared/layers.wgsl `NO_LAYER_BELOW`), never interpolated into
+/// a value.
+pub(crate) const NO_LAYER: f32 = -3.0e38;
 
 /// The layer level voxels a volume node's samples read: level, first and
 /// last voxel per axis (inclusive).
@@ -287,8 +293,8 @@ impl Placed {
     }
 
     /// The layer resampled onto the volume node `key`'s stored voxels (the
-    /// volume's brick layout; NaN where the layer has no data), and the
-    /// bytes read; `None` where it reads no brick of the layer.
+    /// volume's brick layout; [`NO_LAYER`] where the layer has no data),
+    /// and the bytes read; `None` where it reads no brick of the layer.
     pub fn brick(&self, key: NodeKey, empty: &EmptinessTable) -> Result<(Option<Vec<f32>>, u64)> {
         let Some(region @ (k, lo, hi)) = self.region(key) else {
             return Ok((None, 0));
@@ -370,7 +376,7 @@ impl Placed {
         let vb = self.vol.brick as i64;
         let vd = self.vol.level_dims(key.level as u32);
         let kc = key.coords();
-        let mut out = vec![f32::NAN; vside * vside * vside];
+        let mut out = vec![NO_LAYER; vside * vside * vside];
         for (i, o) in out.iter_mut().enumerate() {
             let t = [i % vside, (i / vside) % vside, i / (vside * vside)];
             let p: [f64; 3] = std::array::from_fn(|a| {
@@ -385,7 +391,8 @@ impl Placed {
             let g: [f64; 3] =
                 std::array::from_fn(|a| (q[a] / lv[a] - 0.5).clamp(lo[a] as f64, hi[a] as f64));
             if self.nearest {
-                *o = at(g.map(|x| x.round() as i64));
+                let v = at(g.map(|x| x.round() as i64));
+                *o = if v.is_nan() { NO_LAYER } else { v };
                 continue;
             }
             // Trilinear over the taps that have data (as the kernel's

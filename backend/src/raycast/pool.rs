@@ -415,8 +415,14 @@ impl BrickPool {
                     }
                 }
             }
+            // A placed layer's voxels without medium (its NO_LAYER,
+            // below −1e20) take no part in a cell's range, as NaN does not.
             for (k, m) in media.into_iter().enumerate() {
-                decoded[k] = m;
+                decoded[k] = m.map(|v| {
+                    v.into_iter()
+                        .map(|x| if x < -1e20 { f32::NAN } else { x })
+                        .collect()
+                });
             }
             bytemuck::cast_slice(&texels).to_vec()
         } else {
