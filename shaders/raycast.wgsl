@@ -313,15 +313,31 @@ fn next_leaf(w: ptr<function, Walk>, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32
     return found_leaf;
 }
 
-// The step through a leaf: `step_factor` × its voxel, or with the adaptive
+// A voxel of edges `e` measured along the unit direction `d`: the radius
+// along d of the ellipsoid whose semi-axes are the edges, 1 / |d ⊘ e|. A
+// cubic voxel's edge whatever the direction (returned as is, so that
+// isotropic volumes step exactly as before); over thick slices the thin
+// edge for rays across the slices, the thick one for rays along z, and in
+// between what the ray crosses (issue 40: the step follows the voxel in
+// the ray's direction, not its smallest or largest side).
+fn voxel_along(e: vec3<f32>, d: vec3<f32>) -> f32 {
+    if (e.x == e.y && e.y == e.z) {
+        return e.x;
+    }
+    let q = d / e;
+    return inverseSqrt(dot(q, q));
+}
+
+// The step through a leaf: `step_factor` × its voxel along the ray
+// (`voxel_along`), or with the adaptive
 // step L12 §4.4 Eq. 3, λ = t·sin(θ/2), the radius of the pixel's cone at
 // distance `t_eye` from the eye (data units, as the ray's parameter), taken
 // at the leaf's entry so that the samples of a leaf stay evenly spaced
 // (step_factor 0.5 is λ itself). The prediction buffer's sparse traversal
 // steps by the voxel size / κ, κ from the brick's variance (B10 §4.5).
-fn leaf_step(leaf: Leaf, t_eye: f32, sin_half: f32, sparse: bool) -> f32 {
+fn leaf_step(leaf: Leaf, d: vec3<f32>, t_eye: f32, sin_half: f32, sparse: bool) -> f32 {
     let step_factor = frame.render.x;
-    let voxel = min(min(leaf.voxel.x, leaf.voxel.y), leaf.voxel.z);
+    let voxel = voxel_along(leaf.voxel, d);
     var h = step_factor * voxel;
     if (frame.render.w > 0.5) {
         h = max(2.0 * step_factor * t_eye * sin_half, voxel / 64.0);
@@ -563,7 +579,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             blend = lv.up.slot != NO_SLOT
                 && max(lod_offset(walk.level, o + d * t), lod_offset(walk.level, o + d * t_exit)) > 0.0;
         }
-        let h = leaf_step(leaf, t_base + t, pray.sin_half, pb.sparse);
+        let h = leaf_step(leaf, d, t_base + t, pray.sin_half, pb.sparse);
         // Samples fall at t + k·h (and where the leaf ends or a tool's
         // boundary lies).
         var tc = t;

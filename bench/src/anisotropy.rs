@@ -1,6 +1,8 @@
 //! `parallax bench anisotropy`: the level of detail on thick slices.
 
-use crate::measure::{converged_frame, create_out, precise_config, write_table, Shot};
+use crate::measure::{
+    converged, create_out, precise_config, timed_frame, write_table, Shot, CONVERGE_FRAMES,
+};
 use anyhow::Result;
 use parallax_backend::data::synth::{coord, shepp_logan};
 use parallax_backend::metric::image_error;
@@ -19,7 +21,9 @@ pub struct AnisotropyPoint {
     pub volume: &'static str,
     pub spacing: [f64; 3],
     pub dims: [usize; 3],
-    /// "near" or "far" (the volume four times smaller on screen).
+    /// "near", "far" (the volume four times smaller on screen), or
+    /// "axial" (near, seen along the slices' normal: its rays cross the
+    /// thick edge).
     pub view: &'static str,
     pub accuracy: f64,
     /// Multilevel sampling (G10 §4) on.
@@ -28,6 +32,9 @@ pub struct AnisotropyPoint {
     pub max_abs: f64,
     pub bricks: u64,
     pub frame_ms: f64,
+    /// Samples the frame took (counted on the axial view only, whose
+    /// frame time then includes the counting; 0 elsewhere).
+    pub samples: u64,
 }
 
 /// The level-of-detail error on thick slices: the same CT-like phantom
@@ -121,10 +128,15 @@ fn ct_tf() -> Result<TransferFunction> {
     ])
 }
 
-fn placement(size: f64) -> Placement {
+fn placement(size: f64, axial: bool) -> Placement {
     Placement {
         center: [0.0, 0.0, 0.0],
-        rotation_deg: [-70.0, 25.0, 0.0],
+        // Axial: the volume's z (the slices' normal) 7° off the view axis.
+        rotation_deg: if axial {
+            [5.0, 5.0, 0.0]
+        } else {
+            [-70.0, 25.0, 0.0]
+        },
         size,
     }
 }
@@ -142,7 +154,11 @@ pub fn anisotropy_study(
     create_out(out)?;
     let tf = ct_tf()?;
     let view = View::window(resolution, [0.4, 0.3], [0.0, 0.0, 0.8]);
-    let views = [("near", size), ("far", size / 4.0)];
+    let views = [
+        ("near", size, false),
+        ("far", size / 4.0, false),
+        ("axial", size, true),
+    ];
     let tmp = tempfile::tempdir()?;
     let mut points = Vec::new();
     let default = RenderConfig::default().accuracy;
@@ -153,10 +169,15 @@ pub fn anisotropy_study(
         });
         let references: Vec<Vec<[f64; 4]>> = views
             .iter()
-            .map(|&(vw, sz)| {
+            .map(|&(vw, sz, axial)| {
                 let t = Instant::now();
-                let r =
-                    reference::render(&vol, &tf, &placement(sz), &view, Tolerance { abs: 1e-6 });
+                let r = reference::render(
+                    &vol,
+                    &tf,
+                    &placement(sz, axial),
+                    &view,
+                    Tolerance { abs: 1e-6 },
+                );
                 eprintln!(
                     "{vname}, {vw}: reference integral {:.1} s",
                     t.elapsed().as_secs_f64()
@@ -176,15 +197,19 @@ pub fn anisotropy_study(
                     ..Default::default()
                 },
             )?;
-            for (&(vw, sz), reference) in views.iter().zip(&references) {
+            for (&(vw, sz, axial), reference) in views.iter().zip(&references) {
                 let shot = Shot {
                     db: &db,
                     tf: &tf,
-                    placement: &placement(sz),
+                    placement: &placement(sz, axial),
                     view: &view,
                 };
                 for &(accuracy, multilevel) in &accuracies {
-                    let p = measure(shot, reference, accuracy, multilevel)?;
+                    // The axial view at the default settings only.
+                    if axial && (multilevel || accuracy != default) {
+                        continue;
+                    }
+                    let p = measure(shot, reference, accuracy, multilevel, axial)?;
                     let p = AnisotropyPoint {
                         volume: name,
                         spacing,
@@ -193,12 +218,13 @@ pub fn anisotropy_study(
                         ..p
                     };
                     eprintln!(
-                        "{name:>50}, {vw:>4}, accuracy {accuracy:<5}{}: RMSE {:.2e}, max {:.2e}, {} bricks, {:.0} ms",
+                        "{name:>50}, {vw:>5}, accuracy {accuracy:<5}{}: RMSE {:.2e}, max {:.2e}, {} bricks, {:.0} ms{}",
                         if multilevel { ", multilevel" } else { "" },
                         p.rmse,
                         p.max_abs,
                         p.bricks,
-                        p.frame_ms
+                        p.frame_ms,
+                        if axial { format!(", {} samples", p.samples) } else { String::new() }
                     );
                     points.push(p);
                 }
@@ -216,6 +242,7 @@ fn measure(
     reference: &[[f64; 4]],
     accuracy: f64,
     multilevel: bool,
+    count_samples: bool,
 ) -> Result<AnisotropyPoint> {
     let cfg = RenderConfig {
         accuracy,
@@ -223,7 +250,9 @@ fn measure(
         interpolation: Interpolation::Exact,
         ..precise_config()
     };
-    let (f, frame_ms) = converged_frame(shot, &cfg)?;
+    let (mut r, _) = converged(shot, &cfg, &[], CONVERGE_FRAMES)?;
+    r.count_samples = count_samples;
+    let (f, frame_ms) = timed_frame(&mut r, 100, shot, &cfg)?;
     let e = image_error(&f.images[0], reference);
     Ok(AnisotropyPoint {
         volume: "",
@@ -236,19 +265,28 @@ fn measure(
         max_abs: e.max_abs,
         bricks: f.stats.cut_leaves_with_data,
         frame_ms,
+        samples: f.stats.samples,
     })
 }
 
 fn write_csv(out: &Path, points: &[AnisotropyPoint]) -> Result<()> {
     write_table(
         &out.join("anisotropy.csv"),
-        "volume,spacing_mm,dims,view,accuracy,multilevel,rmse,max_abs,bricks_in_cut,frame_ms",
+        "volume,spacing_mm,dims,view,accuracy,multilevel,rmse,max_abs,bricks_in_cut,frame_ms,samples",
         points.iter().map(|p| {
             let [sx, sy, sz] = p.spacing;
             let [nx, ny, nz] = p.dims;
             format!(
-                "{},{sx}x{sy}x{sz},{nx}x{ny}x{nz},{},{},{},{:.6e},{:.6e},{},{:.1}",
-                p.volume, p.view, p.accuracy, p.multilevel, p.rmse, p.max_abs, p.bricks, p.frame_ms
+                "{},{sx}x{sy}x{sz},{nx}x{ny}x{nz},{},{},{},{:.6e},{:.6e},{},{:.1},{}",
+                p.volume,
+                p.view,
+                p.accuracy,
+                p.multilevel,
+                p.rmse,
+                p.max_abs,
+                p.bricks,
+                p.frame_ms,
+                p.samples
             )
         }),
     )
@@ -256,7 +294,7 @@ fn write_csv(out: &Path, points: &[AnisotropyPoint]) -> Result<()> {
 
 /// Prints the thick slices' error against the isotropic one's, each view.
 fn summarize(points: &[AnisotropyPoint], default: f64) {
-    for vw in ["near", "far"] {
+    for vw in ["near", "far", "axial"] {
         let at_default = |v: &str| {
             points
                 .iter()
