@@ -69,10 +69,7 @@ fn scanner_map(db: &OctreeDb, ldb: &OctreeDb, i: usize) -> Result<Affine> {
                 d.path().display()
             )
         })?;
-        Ok(Affine {
-            m: std::array::from_fn(|r| [w[r][0], w[r][1], w[r][2]]),
-            t: [w[0][3], w[1][3], w[2][3]],
-        })
+        Ok(Affine::from_rows(&w))
     };
     let (wv, wl) = (world(db, "the scene volume")?, world(ldb, "the layer")?);
     let inv = wv.inverse().with_context(|| {

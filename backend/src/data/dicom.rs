@@ -326,7 +326,7 @@ pub struct DicomSource {
     description: String,
     /// Volume space → LPS mm, from the first slice's position and the
     /// orientation (`VolumeSource::world`).
-    world: [[f64; 4]; 3],
+    world: Option<[[f64; 4]; 3]>,
 }
 
 impl DicomSource {
@@ -665,6 +665,6 @@ impl VolumeSource for DicomSource {
     }
 
     fn world(&self) -> Option<[[f64; 4]; 3]> {
-        Some(self.world)
+        self.world
     }
 }

@@ -443,13 +443,21 @@ impl Thresholded {
 /// at `first + i·steps[0] + j·steps[1] + k·steps[2]` (LPS mm; `steps[a]`
 /// one voxel along axis a, its length the spacing): the affine map from
 /// volume space (data units from the first voxel's corner: voxel centres at
-/// (i + ½)·s) to LPS, three rows `[a, b, c, t]` (`VolumeSource::world`).
-pub fn world_from(first: [f64; 3], steps: [[f64; 3]; 3], spacing: [f64; 3]) -> [[f64; 4]; 3] {
-    std::array::from_fn(|r| {
+/// (i + ½)·s) to LPS, three rows `[a, b, c, t]` (`VolumeSource::world`);
+/// `None` where a value is not finite or the steps flatten the volume.
+pub fn world_from(
+    first: [f64; 3],
+    steps: [[f64; 3]; 3],
+    spacing: [f64; 3],
+) -> Option<[[f64; 4]; 3]> {
+    let w: [[f64; 4]; 3] = std::array::from_fn(|r| {
         let m: [f64; 3] = std::array::from_fn(|a| steps[a][r] / spacing[a]);
         let t = first[r] - 0.5 * (steps[0][r] + steps[1][r] + steps[2][r]);
         [m[0], m[1], m[2], t]
-    })
+    });
+    let ok = w.as_flattened().iter().all(|x| x.is_finite())
+        && crate::loader::Affine::from_rows(&w).inverse().is_some();
+    ok.then_some(w)
 }
 
 impl VolumeSource for Thresholded {

@@ -30,6 +30,15 @@ pub struct Affine {
 }
 
 impl Affine {
+    /// The map of three rows `[a, b, c, t]` (a `transform`, a database's
+    /// scanner geometry).
+    pub fn from_rows(w: &[[f64; 4]; 3]) -> Affine {
+        Affine {
+            m: std::array::from_fn(|r| [w[r][0], w[r][1], w[r][2]]),
+            t: [w[0][3], w[1][3], w[2][3]],
+        }
+    }
+
     pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
         std::array::from_fn(|r| {
             self.m[r][0] * p[0] + self.m[r][1] * p[1] + self.m[r][2] * p[2] + self.t[r]

@@ -81,8 +81,7 @@ fn world_of(label: &str, f: &Fields, keep: &[usize], spacing: [f64; 3]) -> Optio
     for (a, &axis) in keep.iter().enumerate() {
         steps[a] = lps(vectors.get(axis)?.as_deref()?)?;
     }
-    let w = super::super::world_from(lps(&origin)?, steps, spacing);
-    w.as_flattened().iter().all(|x| x.is_finite()).then_some(w)
+    super::super::world_from(lps(&origin)?, steps, spacing)
 }
 
 /// NRRD `type` names of the supported sample types (every spelling teem
