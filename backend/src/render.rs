@@ -14,7 +14,7 @@ use crate::store::{BrickEncoding, NodeKey, OctreeDb};
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{
-    Filter, Interpolation, Layer, LayerTransform, Mode, RenderConfig, Shading,
+    Filter, Interpolation, Layer, LayerTransform, Mode, Preintegration, RenderConfig, Shading,
 };
 use parallax_common::protocol::FrameStats;
 use parallax_common::tf::labels;
@@ -477,6 +477,13 @@ impl Renderer {
             empty_refraction,
             function: tf.clone(),
         });
+        if let Some(tf) = &self.tf {
+            tracing::info!(
+                closed_form_pieces = ?tf.table.closed_pieces(),
+                auto = ?self.preintegration(Preintegration::Auto),
+                "transfer function installed"
+            );
+        }
         // Last frame's visibility was for another transfer function.
         self.last.clear();
         self.cells_stale = true;
@@ -725,8 +732,18 @@ impl Renderer {
                 }),
             }),
             tricubic: cfg.filter == Filter::Tricubic,
-            preintegration: cfg.preintegration,
+            preintegration: self.preintegration(cfg.preintegration),
             layers: self.layer_params(&ctx.placement),
+        }
+    }
+
+    /// The way to the exact integral this frame takes: "auto" resolved for
+    /// this device and the transfer function (`Preintegration::resolve`).
+    pub fn preintegration(&self, asked: Preintegration) -> Preintegration {
+        let cpu = self.gpu.info.device_type == wgpu::DeviceType::Cpu;
+        match &self.tf {
+            Some(tf) => tf.table.resolve(asked, cpu),
+            None => asked.resolve(None, cpu),
         }
     }
 

@@ -136,13 +136,18 @@ pub struct RenderConfig {
     /// pieces between control points (common/src/tf/closed.rs), no table
     /// read. Its cost grows with the pieces where τ > 0: on a CPU device,
     /// where a texture read is a gather per channel and lane, it beats
-    /// "2d" for a few (the Colin27 brain's 4: 0.86–0.91 of the frame time)
-    /// and may lose for many (the CT-Bone preset's 12: 0.96 at a fine
-    /// step, 1.24 at a coarse one), docs/performance.md "Pre-integration
-    /// per case". A function with more than 16 such pieces over the data
-    /// range (or extinctions too large for f32 sums) is looked up as with
-    /// "2d".
-    #[serde(default = "exact")]
+    /// the table for a few and may lose for many, docs/performance.md
+    /// "Pre-integration per case". A function with more than 16 such pieces
+    /// over the data range (or extinctions too large for f32 sums) is
+    /// looked up as with "2d".
+    ///
+    /// "auto" (the default): the fastest way to the exact integral on this
+    /// device for this function, as measured (docs/performance.md,
+    /// "Pre-integration per case"): the closed form on a CPU device where
+    /// the function has one (0.50–0.82 of the table's frame time on
+    /// lavapipe, 2 to 15 pieces, fine and coarse steps), else the exact
+    /// table (on a GPU, the H200, the table was the faster).
+    #[serde(default)]
     pub preintegration: Preintegration,
     /// `[render.overlay]`: the tools' geometry and the 3D cursor drawn over
     /// every view (G10 §5; `common/src/overlay.rs`). Off by default.
@@ -150,17 +155,30 @@ pub struct RenderConfig {
     pub overlay: crate::overlay::Overlay,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Preintegration {
     Exact,
     #[serde(rename = "2d")]
     TwoD,
     Analytic,
+    #[default]
+    Auto,
 }
 
-fn exact() -> Preintegration {
-    Preintegration::Exact
+impl Preintegration {
+    /// What "auto" means for a function of `closed_pieces` pieces (`None`:
+    /// it has no closed form) on a CPU device or not; any other choice is
+    /// kept.
+    pub fn resolve(self, closed_pieces: Option<u32>, cpu_device: bool) -> Preintegration {
+        match self {
+            Preintegration::Auto if cpu_device && closed_pieces.is_some() => {
+                Preintegration::Analytic
+            }
+            Preintegration::Auto => Preintegration::Exact,
+            p => p,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -967,6 +985,21 @@ mod tests {
         }
         std::fs::write(&p, text).unwrap();
         p
+    }
+
+    #[test]
+    fn auto_preintegration_takes_the_closed_form_on_cpu_devices_only() {
+        use Preintegration::*;
+        assert_eq!(RenderConfig::default().preintegration, Auto);
+        let parsed: RenderConfig = toml::from_str("preintegration = \"auto\"").unwrap();
+        assert_eq!(parsed.preintegration, Auto);
+        assert_eq!(Auto.resolve(Some(15), true), Analytic);
+        assert_eq!(Auto.resolve(None, true), Exact, "no closed form: the table");
+        assert_eq!(Auto.resolve(Some(2), false), Exact, "a GPU: the table");
+        for p in [Exact, TwoD, Analytic] {
+            assert_eq!(p.resolve(Some(2), true), p, "a choice is kept");
+            assert_eq!(p.resolve(None, false), p);
+        }
     }
 
     const DISPLAY: &str = "[screen]\nsize = [0.4, 0.3]\npixel_size = 0.001\n[observer]\nposition = [0, 0, 1]\nprojectors = \"p/\"\n";

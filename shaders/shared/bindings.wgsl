@@ -60,14 +60,22 @@ struct ToolParams {
 }
 
 // The frame's and the tools' constants are read from private copies that
-// `main` makes at its start (`load_constants`): lavapipe reads a uniform
-// buffer through a per-lane, bounds-checked gather wherever it cannot prove
-// the offset uniform, and it did so for every use of these fields inside
-// the sample loop; a copy is read once per ray and then lives in registers
-// or on the stack. On the Colin27 brain it took 14–21 % off the frame
-// (docs/performance.md, "Kernel changes on a CPU device"). On a GPU the copy is one
-// read per ray of the fields the kernel uses.
-@group(0) @binding(0) var<uniform> frame_uniform: GpuFrame;
+// `main` makes at its start (`load_constants`): lavapipe reads a buffer
+// through a per-lane, bounds-checked gather wherever it cannot prove the
+// offset uniform, and it did so for every use of these fields inside the
+// sample loop; a copy is read once per ray and then lives in registers or
+// on the stack. On the Colin27 brain it took 14–21 % off the frame
+// (docs/performance.md, "Kernel changes on a CPU device"). On a GPU the copy
+// is one read per ray of the fields the kernel uses.
+//
+// The constants are read-only storage, not uniform buffers: lavapipe
+// compiles a new variant of a kernel for each set of values of the uniform
+// words its branches test ("inlined uniforms") and keeps every variant, so
+// constants that change each frame (the view, the tiles listed) made it
+// compile the kernel again each frame and keep it: about 0.6 MiB and a
+// compilation a frame in the live soak (docs/performance.md, "Constants in
+// storage").
+@group(0) @binding(0) var<storage, read> frame_constants: GpuFrame;
 var<private> frame: GpuFrame;
 // The frame's views, spatial index and tiles, in texels of four words
 // (backend/src/raycast/texels.rs: a CPU device reads a storage buffer one
@@ -88,7 +96,7 @@ var<private> frame: GpuFrame;
 @group(0) @binding(6) var<storage, read_write> feedback: array<u32>;
 @group(0) @binding(7) var<storage, read_write> image: array<vec4<f32>>;
 @group(0) @binding(8) var pool_sampler: sampler;
-@group(0) @binding(9) var<uniform> tool_uniform: array<ToolParams, 3>;
+@group(0) @binding(9) var<storage, read> tool_constants: array<ToolParams, 3>;
 var<private> tools: array<ToolParams, 3>;
 // Isosurfaces: each pixel's last hit distance along its ray (volume units),
 // or PB_MISS_SURFACE / PB_MISS_BOX (B10 §4.1). Read and written per pixel.
@@ -122,9 +130,9 @@ struct TfPieces {
 }
 
 // Read from a private copy, as the frame's constants are (see below): read
-// from the uniform itself, even at constant indices, the brain's frame of
+// from the buffer itself, even at constant indices, the brain's frame of
 // docs/performance.md ("Kernel changes on a CPU device") took 81 ms against 41.
-@group(0) @binding(14) var<uniform> tf_pieces_uniform: TfPieces;
+@group(0) @binding(14) var<storage, read> tf_pieces_constants: TfPieces;
 var<private> tf_pieces: TfPieces;
 
 // Registered layers (shared/layers.wgsl): each layer's table in `tf_table`,
@@ -137,13 +145,13 @@ struct LayerParams {
     angles: vec4<f32>,  // its angles (radians): from, 1 / (to − from), 0, 0
     aux: vec4<u32>,     // its (ι, ν) part: first entry, the running integral's first entry (0: none)
 }
-@group(0) @binding(15) var<uniform> layer_uniform: array<LayerParams, 3>;
+@group(0) @binding(15) var<storage, read> layer_constants: array<LayerParams, 3>;
 
 fn load_constants() {
-    frame = frame_uniform;
-    tools = tool_uniform;
+    frame = frame_constants;
+    tools = tool_constants;
     if (ANALYTIC_PREINT) {
-        tf_pieces = tf_pieces_uniform;
+        tf_pieces = tf_pieces_constants;
     }
 }
 

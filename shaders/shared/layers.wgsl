@@ -47,7 +47,7 @@ var<private> layer_tau: vec3<f32>;
 // The layers' constants, copied once per ray like the frame's.
 fn load_layers() {
     if (LAYERS > 0u) {
-        layer_p = layer_uniform;
+        layer_p = layer_constants;
     }
 }
 

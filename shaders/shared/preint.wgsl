@@ -9,10 +9,10 @@
 // (G10 §4: "we employ preintegration for all attributes"). `prefix` is where
 // that part's running integral starts, 0 when it has none.
 
-// Read from the uniform itself: an array indexed by a value is best left
-// where a GPU keeps constants (a private copy would go to scratch memory).
+// Read from the buffer itself: an array indexed by a value is best left
+// where a GPU keeps it (a private copy would go to scratch memory).
 fn tf_offset(k: u32) -> u32 {
-    return frame_uniform.tf_offsets[k >> 2u][k & 3u];
+    return frame_constants.tf_offsets[k >> 2u][k & 3u];
 }
 
 // The average over [j + ta, j + tb] (0 ≤ ta ≤ tb ≤ 1) of bin j's quadratic

@@ -9,7 +9,7 @@ use crate::gpu::Gpu;
 
 /// The kernel's bindings by their WGSL names; a test checks them against
 /// naga's reflection of every kernel combination.
-pub(super) const FRAME_UNIFORM: u32 = 0;
+pub(super) const FRAME_CONSTANTS: u32 = 0;
 pub(super) const FRAME_TABLE: u32 = 1;
 pub(super) const POOL: u32 = 3;
 pub(super) const SLOT_TABLE: u32 = 4;
@@ -17,18 +17,18 @@ pub(super) const TF_TABLE: u32 = 5;
 pub(super) const FEEDBACK: u32 = 6;
 pub(super) const IMAGE: u32 = 7;
 pub(super) const POOL_SAMPLER: u32 = 8;
-pub(super) const TOOL_UNIFORM: u32 = 9;
+pub(super) const TOOL_CONSTANTS: u32 = 9;
 pub(super) const PREDICTION: u32 = 10;
 pub(super) const COUNTERS: u32 = 11;
 pub(super) const PREINT_GRID: u32 = 12;
 pub(super) const GRID_SAMPLER: u32 = 13;
-pub(super) const TF_PIECES_UNIFORM: u32 = 14;
-pub(super) const LAYER_UNIFORM: u32 = 15;
+pub(super) const TF_PIECES_CONSTANTS: u32 = 14;
+pub(super) const LAYER_CONSTANTS: u32 = 15;
 
 /// Every binding with its WGSL name.
 #[cfg(test)]
 pub(super) const NAMED: [(&str, u32); 15] = [
-    ("frame_uniform", FRAME_UNIFORM),
+    ("frame_constants", FRAME_CONSTANTS),
     ("frame_table", FRAME_TABLE),
     ("pool", POOL),
     ("slot_table", SLOT_TABLE),
@@ -36,13 +36,13 @@ pub(super) const NAMED: [(&str, u32); 15] = [
     ("feedback", FEEDBACK),
     ("image", IMAGE),
     ("pool_sampler", POOL_SAMPLER),
-    ("tool_uniform", TOOL_UNIFORM),
+    ("tool_constants", TOOL_CONSTANTS),
     ("prediction", PREDICTION),
     ("counters", COUNTERS),
     ("preint_grid", PREINT_GRID),
     ("grid_sampler", GRID_SAMPLER),
-    ("tf_pieces_uniform", TF_PIECES_UNIFORM),
-    ("layer_uniform", LAYER_UNIFORM),
+    ("tf_pieces_constants", TF_PIECES_CONSTANTS),
+    ("layer_constants", LAYER_CONSTANTS),
 ];
 
 /// The kernel's bind group layout: bricks filtered by the texture unit or
@@ -52,7 +52,7 @@ pub(super) fn layout(gpu: &Gpu, hw_filter: bool, grid_filterable: bool) -> wgpu:
         .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("raycast"),
             entries: &[
-                uniform(FRAME_UNIFORM),
+                storage(FRAME_CONSTANTS, true),
                 texels::layout_entry(FRAME_TABLE),
                 texture(POOL, wgpu::TextureViewDimension::D3, hw_filter),
                 texels::layout_entry(SLOT_TABLE),
@@ -60,13 +60,13 @@ pub(super) fn layout(gpu: &Gpu, hw_filter: bool, grid_filterable: bool) -> wgpu:
                 storage(FEEDBACK, false),
                 storage(IMAGE, false),
                 sampler(POOL_SAMPLER, hw_filter),
-                uniform(TOOL_UNIFORM),
+                storage(TOOL_CONSTANTS, true),
                 storage(PREDICTION, false),
                 storage(COUNTERS, false),
                 texture(PREINT_GRID, wgpu::TextureViewDimension::D2, grid_filterable),
                 sampler(GRID_SAMPLER, grid_filterable),
-                uniform(TF_PIECES_UNIFORM),
-                uniform(LAYER_UNIFORM),
+                storage(TF_PIECES_CONSTANTS, true),
+                storage(LAYER_CONSTANTS, true),
             ],
         })
 }
@@ -96,7 +96,7 @@ pub(super) fn group(
         label: Some("raycast"),
         layout,
         entries: &[
-            entry(FRAME_UNIFORM, fr.uniform.as_entire_binding()),
+            entry(FRAME_CONSTANTS, fr.uniform.as_entire_binding()),
             entry(FRAME_TABLE, TextureView(&fr.table.view)),
             entry(POOL, TextureView(&b.pool.view)),
             entry(SLOT_TABLE, TextureView(&b.pool.slots.view)),
@@ -104,28 +104,15 @@ pub(super) fn group(
             entry(FEEDBACK, fr.feedback.buffer.as_entire_binding()),
             entry(IMAGE, fr.image.buffer.as_entire_binding()),
             entry(POOL_SAMPLER, Sampler(b.sampler)),
-            entry(TOOL_UNIFORM, b.tools.as_entire_binding()),
+            entry(TOOL_CONSTANTS, b.tools.as_entire_binding()),
             entry(PREDICTION, fr.prediction.buffer.as_entire_binding()),
             entry(COUNTERS, fr.counters.as_entire_binding()),
             entry(PREINT_GRID, TextureView(b.grid)),
             entry(GRID_SAMPLER, Sampler(b.grid_sampler)),
-            entry(TF_PIECES_UNIFORM, b.tf.pieces.as_entire_binding()),
-            entry(LAYER_UNIFORM, b.layers.as_entire_binding()),
+            entry(TF_PIECES_CONSTANTS, b.tf.pieces.as_entire_binding()),
+            entry(LAYER_CONSTANTS, b.layers.as_entire_binding()),
         ],
     })
-}
-
-fn uniform(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
 }
 
 fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {

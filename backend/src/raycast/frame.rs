@@ -104,7 +104,7 @@ impl FrameBuffers {
             uniform: gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("frame"),
                 size: std::mem::size_of::<GpuFrame>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
             table: texels::TexelTable::new(gpu, "views, spatial index and tiles", 0),

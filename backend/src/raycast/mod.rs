@@ -121,14 +121,14 @@ impl Raycaster {
         let tools = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("tool parameters"),
             size: std::mem::size_of::<[ToolParams; MAX_ENHANCERS]>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let layers = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("layer parameters"),
             size: std::mem::size_of::<[params::LayerParams; parallax_common::config::MAX_LAYERS]>()
                 as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         Ok(Raycaster {

@@ -171,15 +171,15 @@ impl TfTable {
         buffer.write(gpu, 0, &texels);
         let end_allowed = prefix_offset != 0 && dvr_within_end_range(table);
         let closed = ClosedForm::new(tf, table.vmin(), table.vmax());
-        let uniform: GpuPieces = closed
+        let words: GpuPieces = closed
             .as_ref()
             .map_or([[0.0; 4]; 1 + 4 * MAX_PIECES], |c| c.gpu());
         let pieces = gpu
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("transfer function pieces"),
-                contents: bytemuck::cast_slice(&uniform),
-                usage: wgpu::BufferUsages::UNIFORM,
+                contents: bytemuck::cast_slice(&words),
+                usage: wgpu::BufferUsages::STORAGE,
             });
         TfTable {
             buffer,
@@ -314,13 +314,25 @@ impl TfTable {
         self.closed_pieces.is_some()
     }
 
+    /// The closed form's pieces over the data range (`None`: it has none
+    /// the kernel can use).
+    pub fn closed_pieces(&self) -> Option<u32> {
+        self.closed_pieces
+    }
+
+    /// The way to the integral `preintegration` asks for on this device
+    /// ("auto" made definite, `Preintegration::resolve`).
+    pub fn resolve(&self, preintegration: Preintegration, cpu_device: bool) -> Preintegration {
+        preintegration.resolve(self.closed_pieces, cpu_device)
+    }
+
     /// Whether `preintegration` reads the 2D table ([`Self::build_grid`]):
     /// "2d", and "analytic" where the function has no closed form.
     pub fn wants_grid(&self, preintegration: Preintegration) -> bool {
         match preintegration {
             Preintegration::TwoD => true,
             Preintegration::Analytic => !self.has_closed_form(),
-            Preintegration::Exact => false,
+            Preintegration::Exact | Preintegration::Auto => false,
         }
     }
 
