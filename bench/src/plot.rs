@@ -36,6 +36,7 @@ pub fn work_precision(path: &Path, points: &[Point]) -> Result<()> {
         ("adaptive_step", "full", RGBColor(230, 140, 0)),
         ("multilevel", "full", RGBColor(0, 160, 160)),
         ("tricubic", "full", RGBColor(140, 70, 20)),
+        ("preintegration_exact", "full", RGBColor(60, 60, 160)),
         ("preintegration_2d", "full", RGBColor(120, 0, 200)),
         ("preintegration_analytic", "full", RGBColor(200, 0, 120)),
         ("accuracy", "full", BLUE),

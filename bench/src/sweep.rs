@@ -164,6 +164,12 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
         c.step_factor = s;
         c.filter = Filter::Tricubic;
     });
+    // The exact table (five reads a segment), which "auto" (the base)
+    // leaves for the closed form on a CPU device where the function has one.
+    add("preintegration_exact", "full", &steps, |c, s| {
+        c.step_factor = s;
+        c.preintegration = Preintegration::Exact;
+    });
     // The 2D pre-integration table (one bilinear fetch a segment).
     add("preintegration_2d", "full", &steps, |c, s| {
         c.step_factor = s;

@@ -142,11 +142,12 @@ pub struct RenderConfig {
     /// looked up as with "2d".
     ///
     /// "auto" (the default): the fastest way to the exact integral on this
-    /// device for this function, as measured (docs/performance.md,
-    /// "Pre-integration per case"): the closed form on a CPU device where
-    /// the function has one (0.50–0.82 of the table's frame time on
-    /// lavapipe, 2 to 15 pieces, fine and coarse steps), else the exact
-    /// table (on a GPU, the H200, the table was the faster).
+    /// device for this function, as measured (docs/performance.md, "The
+    /// default: auto"): the closed form on a CPU device where the function
+    /// has one (0.50–0.81 of the table's frame time on lavapipe, 2 to 15
+    /// pieces, fine and coarse steps; 28 pieces, beyond the limit, took
+    /// 1.22–1.27), else the exact table (on a GPU, the H200, the table was
+    /// the faster). Never the 2D table, which is not the exact integral.
     #[serde(default)]
     pub preintegration: Preintegration,
     /// `[render.overlay]`: the tools' geometry and the 3D cursor drawn over
