@@ -341,7 +341,7 @@ mod tests {
     fn every_knob_changes_the_base() {
         let base = precise_config();
         let s = settings(&base);
-        assert_eq!(s.len(), 46);
+        assert_eq!(s.len(), 50);
         // Each setting differs from the base, except the sweep's own base
         // step (0.25) of the plain step knobs.
         let same: Vec<_> = s
