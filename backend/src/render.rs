@@ -740,11 +740,8 @@ impl Renderer {
     /// The way to the exact integral this frame takes: "auto" resolved for
     /// this device and the transfer function (`Preintegration::resolve`).
     pub fn preintegration(&self, asked: Preintegration) -> Preintegration {
-        let cpu = self.gpu.info.device_type == wgpu::DeviceType::Cpu;
-        match &self.tf {
-            Some(tf) => tf.table.resolve(asked, cpu),
-            None => asked.resolve(None, cpu),
-        }
+        let pieces = self.tf.as_ref().and_then(|tf| tf.table.closed_pieces());
+        asked.resolve(pieces, self.gpu.info.device_type == wgpu::DeviceType::Cpu)
     }
 
     /// The registered layers' opacity and view-dependent opacity, its axis

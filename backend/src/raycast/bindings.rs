@@ -96,7 +96,7 @@ pub(super) fn group(
         label: Some("raycast"),
         layout,
         entries: &[
-            entry(FRAME_CONSTANTS, fr.uniform.as_entire_binding()),
+            entry(FRAME_CONSTANTS, fr.constants.as_entire_binding()),
             entry(FRAME_TABLE, TextureView(&fr.table.view)),
             entry(POOL, TextureView(&b.pool.view)),
             entry(SLOT_TABLE, TextureView(&b.pool.slots.view)),

@@ -53,7 +53,7 @@ impl Grown {
 /// group over them, rebuilt only when a buffer grows or the transfer
 /// function's table or the brick pool is another one.
 pub(super) struct FrameBuffers {
-    pub(super) uniform: wgpu::Buffer,
+    pub(super) constants: wgpu::Buffer,
     /// The views, the spatial index and the tiles the dispatch runs
     /// (`tiles::tiles`), one after the other (`FrameTable`).
     pub(super) table: texels::TexelTable,
@@ -101,7 +101,7 @@ const READBACK: wgpu::BufferUsages =
 impl FrameBuffers {
     pub(super) fn new(gpu: &Gpu) -> Self {
         FrameBuffers {
-            uniform: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            constants: gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("frame"),
                 size: std::mem::size_of::<GpuFrame>() as u64,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,

@@ -3,6 +3,7 @@
 //! feedback buffer, zeroed once per frame for all views (G10 §5).
 
 mod bindings;
+mod constants;
 mod frame;
 pub mod params;
 mod pipeline;
@@ -13,7 +14,6 @@ mod subframes;
 pub mod texels;
 mod tf_table;
 pub mod tiles;
-mod uniform;
 
 pub use crate::geometry::SceneGeometry;
 use crate::gpu::Gpu;
@@ -300,7 +300,7 @@ impl Raycaster {
             settings,
             ..
         } = *inputs;
-        let mut frame = uniform::frame_uniform(pool, tf, scene, settings);
+        let mut frame = constants::frame_constants(pool, tf, scene, settings);
         let table = frame::frame_table(gviews, index, pool, tiles);
         let most = texels::ROW as u64 * gpu.device.limits().max_texture_dimension_2d as u64;
         if table.texels.len() as u64 > most {
@@ -326,7 +326,7 @@ impl Raycaster {
         }
         let fr = &self.frame;
         gpu.queue
-            .write_buffer(&fr.uniform, 0, bytemuck::bytes_of(&frame));
+            .write_buffer(&fr.constants, 0, bytemuck::bytes_of(&frame));
         let mut texels = table.texels;
         let rows = texels.len().div_ceil(texels::ROW as usize);
         texels.resize(rows * texels::ROW as usize, [0; 4]);

@@ -686,7 +686,7 @@ mod tests {
         check!("IndexNode", IndexNode, [tree, data, range, nx, ny, nz]);
         check!("ToolParams", ToolParams, [a, b, c, d]);
         check!("LayerParams", LayerParams, [table, at, axis, angles, aux]);
-        // The closed form's uniform: its header and MAX_PIECES pieces.
+        // The closed form's buffer: its header and MAX_PIECES pieces.
         let (span, _) = layout("TfPieces");
         assert_eq!(
             span as usize,

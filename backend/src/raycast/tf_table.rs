@@ -320,12 +320,6 @@ impl TfTable {
         self.closed_pieces
     }
 
-    /// The way to the integral `preintegration` asks for on this device
-    /// ("auto" made definite, `Preintegration::resolve`).
-    pub fn resolve(&self, preintegration: Preintegration, cpu_device: bool) -> Preintegration {
-        preintegration.resolve(self.closed_pieces, cpu_device)
-    }
-
     /// Whether `preintegration` reads the 2D table ([`Self::build_grid`]):
     /// "2d", and "analytic" where the function has no closed form.
     pub fn wants_grid(&self, preintegration: Preintegration) -> bool {

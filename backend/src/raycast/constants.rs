@@ -6,7 +6,7 @@ use super::params::GpuFrame;
 use super::{BrickPool, RenderSettings, SceneGeometry, TfTable};
 
 /// The frame's constants; the dispatch's tiles are filled in later.
-pub(super) fn frame_uniform(
+pub(super) fn frame_constants(
     pool: &BrickPool,
     tf: &TfTable,
     scene: &SceneGeometry,
