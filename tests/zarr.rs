@@ -305,6 +305,15 @@ fn parallax_import_reads_an_ome_zarr_channel_into_an_octree() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("c 1 of 2 (--channel)"), "{err}");
+    // Its pyramid halves z with y and x, where the octree over 0.75 × 0.5
+    // × 2.5 voxels halves y first: none of its levels is reused, and the
+    // import says so.
+    assert!(
+        err.contains(
+            "resolution level 1 (12×10×8 voxels of 1.5×1×5) is none of the octree's levels"
+        ),
+        "{err}"
+    );
     let db = parallax_backend::store::OctreeDb::open(&out).unwrap();
     assert_eq!(db.header.info.dims, [24, 20, 16]);
     assert_eq!(db.header.info.spacing, [0.75, 0.5, 2.5]);
@@ -356,4 +365,127 @@ fn parallax_synth_writes_an_ome_zarr_that_reads_back_as_its_nrrd() {
         .filter(|e| e.file_name().to_string_lossy().contains("partial"))
         .collect();
     assert!(left.is_empty(), "{left:?}");
+}
+
+/// The 2×2 average in x and y of a grid of `d` voxels (z kept), as f64.
+fn mean_xy(g: &[f32], d: [usize; 3]) -> Vec<f64> {
+    let mut out = Vec::new();
+    for k in 0..d[2] {
+        for j in 0..d[1] / 2 {
+            for i in 0..d[0] / 2 {
+                let at =
+                    |di: usize, dj: usize| g[(k * d[1] + 2 * j + dj) * d[0] + 2 * i + di] as f64;
+                out.push((at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1)) / 4.0);
+            }
+        }
+    }
+    out
+}
+
+fn import_pyramid(extra: &[&str]) -> (parallax_backend::store::OctreeDb, String, String) {
+    let dir = inputs();
+    let out = dir.join(format!("pyramid{}.pxo", extra.len()));
+    let o = Command::new(env!("CARGO_BIN_EXE_parallax"))
+        .arg("import")
+        .arg(dir.join("pyramid.ome.zarr"))
+        .args(["--quantize", "none", "--brick", "8", "-o"])
+        .arg(&out)
+        .args(extra)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&o.stdout).to_string(),
+        String::from_utf8_lossy(&o.stderr).to_string(),
+    );
+    assert!(o.status.success(), "{stderr}");
+    (
+        parallax_backend::store::OctreeDb::open(&out).unwrap(),
+        stdout,
+        stderr,
+    )
+}
+
+#[test]
+fn the_files_pyramid_becomes_the_octrees_coarser_levels_and_its_difference_is_reported() {
+    // 64 × 64 × 16 voxels of 1 × 1 × 4 µm, a pyramid halving y and x: the
+    // octree (bricks of 8) halves the same axes, so its levels 2 and 1 are
+    // the file's levels 1 and 2; the root (8³) is averaged from level 1.
+    let (db, stdout, _) = import_pyramid(&[]);
+    let l = db.layout();
+    assert_eq!(l.levels, 4);
+    assert_eq!(l.level_dims(2), [32, 32, 16]);
+    assert_eq!(l.level_dims(1), [16, 16, 16]);
+    let (d0, s0, _) = expected("pyramid.ome.zarr.s0");
+    let (d1, s1, _) = expected("pyramid.ome.zarr.s1");
+    let (d2, s2, _) = expected("pyramid.ome.zarr.s2");
+    assert_eq!((d0, d1, d2), ([64, 64, 16], [32, 32, 16], [16, 16, 16]));
+    // The source level and the two reused levels hold the file's voxels,
+    // bit for bit.
+    assert_eq!(db.read_level(3).unwrap(), s0);
+    assert_eq!(db.read_level(2).unwrap(), s1);
+    assert_eq!(db.read_level(1).unwrap(), s2);
+    // The writer's levels are not averages (it interpolates), and the
+    // report says by how much: against the average of s0 for level 2, of
+    // s1 (as stored) for level 1.
+    for (level, file_level, fine, fine_d, coarse) in [(2, 1, &s0, d0, &s1), (1, 2, &s1, d1, &s2)] {
+        let avg = mean_xy(fine, fine_d);
+        let d: Vec<f64> = coarse
+            .iter()
+            .zip(&avg)
+            .map(|(&c, &a)| c as f64 - a)
+            .collect();
+        let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
+        let max = d.iter().fold(0f64, |m, x| m.max(x.abs()));
+        assert!(
+            rms > 1.0,
+            "the writer's level {file_level} is not an average"
+        );
+        let line = stdout
+            .lines()
+            .find(|s| {
+                s.starts_with(&format!(
+                    "level {level} from the file's resolution level {file_level}:"
+                ))
+            })
+            .unwrap_or_else(|| panic!("no report of level {level}:\n{stdout}"));
+        let nums: Vec<f64> = line
+            .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .filter_map(|t| t.parse().ok())
+            .collect();
+        // level, file level, RMS, max, voxels
+        assert!((nums[2] - rms).abs() <= 1e-3 * rms, "{line}: RMS {rms}");
+        assert!((nums[3] - max).abs() <= 1e-3 * max, "{line}: max {max}");
+        assert_eq!(nums[4] as usize, coarse.len(), "{line}");
+    }
+    // The root: the 2×2×2 average of the file's level 2.
+    let root = db.read_level(0).unwrap();
+    for k in 0..8 {
+        for j in 0..8 {
+            for i in 0..8 {
+                let mut sum = 0.0;
+                for (di, dj, dk) in (0..8).map(|n| (n & 1, (n >> 1) & 1, n >> 2)) {
+                    sum += s2[((2 * k + dk) * 16 + 2 * j + dj) * 16 + 2 * i + di] as f64;
+                }
+                let got = root[(k * 8 + j) * 8 + i] as f64;
+                assert!(
+                    (got - sum / 8.0).abs() < 1e-2,
+                    "root ({i}, {j}, {k}): {got} against {}",
+                    sum / 8.0
+                );
+            }
+        }
+    }
+
+    // --recompute-levels: level 2 is the average of the source again.
+    let (db, stdout, _) = import_pyramid(&["--recompute-levels"]);
+    assert!(
+        !stdout.contains("from the file's resolution level"),
+        "{stdout}"
+    );
+    let avg = mean_xy(&s0, d0);
+    let level2 = db.read_level(2).unwrap();
+    assert!(level2
+        .iter()
+        .zip(&avg)
+        .all(|(&s, &a)| (s as f64 - a).abs() < 1e-2));
 }

@@ -172,6 +172,30 @@ pub trait VolumeSource {
     fn buffer_bytes(&self) -> u64 {
         0
     }
+    /// The coarser resolution levels the file itself holds beside the one
+    /// read (an OME-Zarr pyramid), finest first: import takes those that
+    /// halve the volume as the octree does instead of averaging its own
+    /// (`ImportOptions::pyramid`).
+    fn pyramid(&self) -> anyhow::Result<Vec<FileLevel>> {
+        Ok(Vec::new())
+    }
+    /// A source reading the file's level `index` (one of [`pyramid`]'s),
+    /// with this source's settings.
+    ///
+    /// [`pyramid`]: VolumeSource::pyramid
+    fn open_level(&self, index: usize) -> anyhow::Result<Box<dyn VolumeSource + Send>> {
+        anyhow::bail!("level {index}: this source holds no resolution levels of its own")
+    }
+}
+
+/// One coarser resolution level of a source file ([`VolumeSource::pyramid`]):
+/// its index among the file's levels, and its voxels and their spacing in
+/// the units of the level being read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FileLevel {
+    pub index: usize,
+    pub dims: [usize; 3],
+    pub spacing: [f64; 3],
 }
 
 /// A whole volume in memory: the reference integrator's input and the small

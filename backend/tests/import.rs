@@ -2,7 +2,7 @@
 //! neighbours, inner nodes against their children, corruption detection.
 
 use parallax_backend::store::{self, info, ImportOptions};
-use parallax_backend::store::{BrickEncoding, NodeKey, OctreeDb, OVERLAP};
+use parallax_backend::store::{BrickEncoding, NodeKey, OctreeDb};
 use parallax_backend::volume::{MemorySource, Volume, VoxelType};
 use std::path::Path;
 
@@ -30,24 +30,14 @@ fn level_grid(db: &OctreeDb, level: u32) -> Vec<f32> {
     let l = db.layout();
     let d = l.level_dims(level);
     let nb = l.level_bricks(level);
-    let b = l.brick;
     let side = l.stored_side();
-    let mut grid = vec![f32::NAN; d[0] * d[1] * d[2]];
+    let grid = db.read_level(level).unwrap();
     let mut bricks = Vec::new();
     for z in 0..nb[2] {
         for y in 0..nb[1] {
             for x in 0..nb[0] {
                 let key = NodeKey::new(level as u8, x as u32, y as u32, z as u32);
-                let v = db.read_brick(key).unwrap().expect("stored");
-                for k in 0..b.min(d[2] - z * b) {
-                    for j in 0..b.min(d[1] - y * b) {
-                        for i in 0..b.min(d[0] - x * b) {
-                            let s = v[((k + OVERLAP) * side + j + OVERLAP) * side + i + OVERLAP];
-                            grid[((z * b + k) * d[1] + y * b + j) * d[0] + x * b + i] = s;
-                        }
-                    }
-                }
-                bricks.push((key, v));
+                bricks.push((key, db.read_brick(key).unwrap().expect("stored")));
             }
         }
     }

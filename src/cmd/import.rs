@@ -46,6 +46,11 @@ pub struct Args {
     /// database lists its labels for a layer's colour table
     #[arg(long)]
     labels: bool,
+    /// Average every coarser level from the finer one, even where the file
+    /// holds its own (an OME-Zarr pyramid halving as the octree does,
+    /// taken by default)
+    #[arg(long)]
+    recompute_levels: bool,
     /// A label volume made from the input: label k where the value is at
     /// or above the k-th of these ascending thresholds (0 below the first);
     /// implies --labels
@@ -137,6 +142,7 @@ pub fn run(a: Args) -> Result<()> {
         progress: std::io::stderr().is_terminal(),
         isotropic_levels: a.isotropic_levels,
         labels: a.labels || a.labels_from_thresholds.is_some(),
+        pyramid: !a.recompute_levels,
     };
     let name = a.input.display().to_string();
     let source = match &described {
@@ -165,6 +171,15 @@ pub fn run(a: Args) -> Result<()> {
         r.seconds,
         r.source_bytes as f64 / 1e6 / r.seconds.max(1e-9)
     );
+    for p in &r.pyramid {
+        println!(
+            "level {} from the file's resolution level {}: it differs from the average of the finer level by {:.4} RMS, at most {:.4} ({} voxels)",
+            p.level, p.file_level, p.rms, p.max, p.voxels
+        );
+    }
+    for u in &r.pyramid_unused {
+        eprintln!("note: {u}");
+    }
     if let Some(l) = &r.summary.labels {
         println!("labels: {}", store::label_list(l));
     }

@@ -37,7 +37,7 @@ UNITS = {a: "micrometer" for a in "zyx"}
 PYRAMID = [{"z": 2, "y": 2, "x": 2}, {"z": 4, "y": 4, "x": 4}]
 
 
-def ome(name, image, axes, fmt, storage):
+def ome(name, image, axes, fmt, storage, scale=SCALE, pyramid=PYRAMID):
     path = os.path.join(out, name)
     store = parse_url(path, mode="w", fmt=fmt).store
     root = zarr.group(store=store, zarr_format=fmt.zarr_format)
@@ -46,8 +46,8 @@ def ome(name, image, axes, fmt, storage):
         root,
         fmt=fmt,
         axes=axes,
-        scale_factors=PYRAMID,
-        scale=SCALE,
+        scale_factors=pyramid,
+        scale=scale,
         axes_units=UNITS,
         storage_options=storage,
     )
@@ -112,6 +112,21 @@ ome(
     "czyx",
     FormatV05(),
     dict(chunks=(1, 16, 20, 24), compressors=[GzipCodec(level=5)]),
+)
+
+# Thick slices with a pyramid halving only y and x, as the ome-zarr tools
+# write by default and as Parallax's octree halves such voxels (1 × 1 × 4
+# µm, then 2 × 2 × 4, then 4 × 4 × 4): the coarser levels import reuses.
+tz, ty, tx = np.meshgrid(np.arange(16), np.arange(64), np.arange(64), indexing="ij")
+thick = (tx * 37 + ty * 11 + tz * 301 + ((tx * ty + 3 * tz) % 23) * 97 - 9000).astype(np.int16)
+ome(
+    "pyramid.ome.zarr",
+    thick,
+    "zyx",
+    FormatV05(),
+    dict(chunks=(8, 16, 16), compressors=[ZstdCodec(level=3)]),
+    scale={"z": 4.0, "y": 1.0, "x": 1.0},
+    pyramid=[{"z": 1, "y": 2, "x": 2}, {"z": 1, "y": 4, "x": 4}],
 )
 
 # Damaged copies.

@@ -30,7 +30,7 @@ use zarrs::array::Array;
 use zarrs::filesystem::FilesystemStore;
 
 use super::{check_finite, check_info, Rounding};
-use crate::volume::{VolumeInfo, VolumeSource, VoxelType};
+use crate::volume::{FileLevel, VolumeInfo, VolumeSource, VoxelType};
 
 /// Which volume of an OME-Zarr image to read (`--level`, `--channel`,
 /// `--time`); `None` is the first.
@@ -68,11 +68,20 @@ struct Chosen {
     scale: Vec<f64>,
     /// "OME-Zarr (NGFF 0.4, Zarr v2), level 0 of 3" and the like.
     what: String,
+    /// The image's resolution levels (1 for a plain array).
+    levels: usize,
 }
 
 /// A Zarr array's volume, read slab by slab along z.
 pub struct ZarrSource {
     label: String,
+    /// Where it was opened, what was chosen, and the image's levels: for
+    /// the coarser levels import reuses (`VolumeSource::pyramid`).
+    path: std::path::PathBuf,
+    sel: ZarrSelect,
+    levels: usize,
+    /// The spacing the metadata gives this level (before `--spacing`).
+    meta_spacing: [f64; 3],
     array_label: String,
     info: VolumeInfo,
     array: Array<FilesystemStore>,
@@ -214,6 +223,7 @@ fn choose(root: &Path, label: &str, sel: &ZarrSelect) -> Result<Chosen> {
                 axes: Vec::new(),
                 scale: Vec::new(),
                 what: format!("a plain {format} array (no OME-Zarr metadata: spacing 1, 1, 1 unless --spacing)"),
+                levels: 1,
             });
         }
         bail!("{label}: a Zarr group without OME-Zarr \"multiscales\" metadata (and not an array): nothing to import");
@@ -271,6 +281,7 @@ fn choose(root: &Path, label: &str, sel: &ZarrSelect) -> Result<Chosen> {
         axes,
         scale,
         what,
+        levels: datasets.len(),
     })
 }
 
@@ -397,7 +408,8 @@ pub fn open_zarr(path: &Path, sel: &ZarrSelect, spacing: Option<[f64; 3]>) -> Re
         shape[n - 2] as usize,
         shape[n - 3] as usize,
     ];
-    let spacing = spacing.unwrap_or([scale[n - 1], scale[n - 2], scale[n - 3]]);
+    let meta_spacing = [scale[n - 1], scale[n - 2], scale[n - 3]];
+    let spacing = spacing.unwrap_or(meta_spacing);
     let info = VolumeInfo {
         dims,
         spacing,
@@ -449,6 +461,10 @@ pub fn open_zarr(path: &Path, sel: &ZarrSelect, spacing: Option<[f64; 3]>) -> Re
     }
     Ok(ZarrSource {
         label,
+        path: path.to_path_buf(),
+        sel: sel.clone(),
+        levels: chosen.levels,
+        meta_spacing,
         array_label,
         info,
         array,
@@ -683,12 +699,48 @@ impl VolumeSource for ZarrSource {
         Some(self.note.clone())
     }
 
+    fn pyramid(&self) -> Result<Vec<FileLevel>> {
+        let level = self.sel.level.unwrap_or(0);
+        (level + 1..self.levels)
+            .map(|index| {
+                let s = self.level_source(index)?;
+                Ok(FileLevel {
+                    index,
+                    dims: s.info.dims,
+                    spacing: s.info.spacing,
+                })
+            })
+            .collect()
+    }
+
+    fn open_level(&self, index: usize) -> Result<Box<dyn VolumeSource + Send>> {
+        Ok(Box::new(self.level_source(index)?))
+    }
+
     fn set_nan_empty(&mut self) {
         self.nan_empty = true;
     }
 }
 
 /// The array's fill value as its metadata writes it.
+impl ZarrSource {
+    /// Another resolution level of the same image, channel and time point,
+    /// its spacing in this level's terms (this level's spacing, `--spacing`
+    /// included, times the ratio of the two levels' scales).
+    fn level_source(&self, index: usize) -> Result<ZarrSource> {
+        let sel = ZarrSelect {
+            level: Some(index),
+            ..self.sel.clone()
+        };
+        let mut s = open_zarr(&self.path, &sel, None)?;
+        s.info.spacing = std::array::from_fn(|a| {
+            self.info.spacing[a] * s.meta_spacing[a] / self.meta_spacing[a]
+        });
+        s.nan_empty = self.nan_empty;
+        Ok(s)
+    }
+}
+
 fn fill_text(array: &Array<FilesystemStore>) -> String {
     serde_json::to_value(array.metadata())
         .ok()

@@ -46,6 +46,13 @@ pub struct ImportOptions {
     /// average ([`label_of`]); bricks are stored exactly and the summary
     /// lists the labels.
     pub labels: bool,
+    /// Take the coarser levels the source file holds itself (an OME-Zarr
+    /// pyramid) where they halve the volume as the octree does, instead of
+    /// averaging the finer level (`--recompute-levels` turns it off); the
+    /// report gives each one's difference to the average. Not for a label
+    /// volume, whose coarser voxels are always import's choice of a label
+    /// (a file's pyramid may have averaged its labels).
+    pub pyramid: bool,
 }
 
 impl Default for ImportOptions {
@@ -59,6 +66,7 @@ impl Default for ImportOptions {
             progress: false,
             isotropic_levels: false,
             labels: false,
+            pyramid: true,
         }
     }
 }
@@ -74,6 +82,121 @@ pub struct ImportReport {
     pub no_data_voxels: u64,
     pub seconds: f64,
     pub summary: Summary,
+    /// The octree's levels taken from the file's own pyramid, finest first.
+    pub pyramid: Vec<PyramidReuse>,
+    /// The file's levels that were not taken, and why.
+    pub pyramid_unused: Vec<String>,
+}
+
+/// An octree level taken from the source file's pyramid.
+#[derive(Clone, Debug)]
+pub struct PyramidReuse {
+    /// The octree level, and the file's level it holds.
+    pub level: u32,
+    pub file_level: usize,
+    /// How far the file's voxels lie from what import would have stored
+    /// there, the average of the finer level's (as that level was stored):
+    /// root mean square and largest difference, over the voxels where both
+    /// have data.
+    pub rms: f64,
+    pub max: f64,
+    pub voxels: u64,
+}
+
+/// A file level feeding an octree level's slices in place of the average.
+struct FileFeed {
+    file_level: usize,
+    src: Box<dyn VolumeSource + Send>,
+    sum_sq: f64,
+    max: f64,
+    voxels: u64,
+}
+
+impl FileFeed {
+    /// The file's next slice, in place of `averaged` (the same slice as
+    /// import averaged it), the two compared.
+    fn take(&mut self, averaged: &[f32], z: usize, source_name: &str) -> Result<Vec<f32>> {
+        let mut slice = vec![0f32; averaged.len()];
+        self.src.read_slices(&mut slice).with_context(|| {
+            format!(
+                "{source_name}: resolution level {}: reading slice {z}",
+                self.file_level
+            )
+        })?;
+        let (sq, max, n) = slice
+            .par_chunks(1 << 14)
+            .zip(averaged.par_chunks(1 << 14))
+            .map(|(f, a)| {
+                let (mut sq, mut max, mut n) = (0f64, 0f64, 0u64);
+                for (&f, &a) in f.iter().zip(a) {
+                    let d = (f as f64 - a as f64).abs();
+                    if !d.is_nan() {
+                        sq += d * d;
+                        max = max.max(d);
+                        n += 1;
+                    }
+                }
+                (sq, max, n)
+            })
+            .reduce(
+                || (0.0, 0.0, 0),
+                |x, y| (x.0 + y.0, x.1.max(y.1), x.2 + y.2),
+            );
+        self.sum_sq += sq;
+        self.max = self.max.max(max);
+        self.voxels += n;
+        Ok(slice)
+    }
+}
+
+/// The file's coarser levels that halve the volume as the octree does, each
+/// matched to its octree level (the same voxel counts, and spacing in the
+/// ratio of the octree's voxels to the source's), opened; and a line for
+/// each level not taken.
+fn plan_pyramid(
+    src: &dyn VolumeSource,
+    layout: &OctreeLayout,
+    spacing: [f64; 3],
+    source_name: &str,
+) -> Result<(Vec<Option<FileFeed>>, Vec<String>)> {
+    let leaf = layout.leaf_level();
+    let mut feeds: Vec<Option<FileFeed>> = (0..layout.levels).map(|_| None).collect();
+    let mut unused = Vec::new();
+    for fl in src.pyramid()? {
+        let matching = (0..leaf).find(|&l| {
+            let scale = layout.voxel_scale(l);
+            layout.level_dims(l) == fl.dims
+                && (0..3).all(|a| {
+                    let want = spacing[a] * scale[a] as f64;
+                    (fl.spacing[a] - want).abs() <= 1e-3 * want
+                })
+        });
+        match matching {
+            Some(l) if feeds[l as usize].is_none() => {
+                let src = src.open_level(fl.index).with_context(|| {
+                    format!("{source_name}: resolution level {}", fl.index)
+                })?;
+                feeds[l as usize] = Some(FileFeed {
+                    file_level: fl.index,
+                    src,
+                    sum_sq: 0.0,
+                    max: 0.0,
+                    voxels: 0,
+                });
+            }
+            _ => unused.push(format!(
+                "resolution level {} ({}×{}×{} voxels of {}×{}×{}) is none of the octree's levels: they are averaged from the finer ones",
+                fl.index,
+                fl.dims[0],
+                fl.dims[1],
+                fl.dims[2],
+                fl.spacing[0],
+                fl.spacing[1],
+                fl.spacing[2]
+            )),
+        }
+    }
+    Ok((feeds, unused))
 }
 
 /// Bricks encoded together in one parallel batch (bounds the memory of
@@ -107,11 +230,18 @@ pub fn import(
     } else {
         OctreeLayout::for_spacing(info.dims, opts.brick, info.spacing)
     };
-    let need = memory_needed(&layout).saturating_add(src.buffer_bytes());
+    let (feeds, pyramid_unused) = if opts.pyramid && !opts.labels {
+        plan_pyramid(&*src, &layout, info.spacing, source_name)?
+    } else {
+        ((0..layout.levels).map(|_| None).collect(), Vec::new())
+    };
+    let need = memory_needed(&layout)
+        .saturating_add(src.buffer_bytes())
+        .saturating_add(feeds.iter().flatten().map(|f| f.src.buffer_bytes()).sum());
     if need > opts.memory_mb as u64 * (1 << 20) {
         bail!(
             "{source_name}: --memory-mb {}: importing {}×{}×{} with {}³ bricks needs at least {} MiB \
-             (slice windows of every level, and what the source buffers); raise --memory-mb",
+             (slice windows of every level, and what the source and its reused levels buffer); raise --memory-mb",
             opts.memory_mb,
             info.dims[0],
             info.dims[1],
@@ -130,6 +260,8 @@ pub fn import(
     let mut writer = OctreeWriter::create(out, &header)?;
     let mut levels: Vec<Level> = (0..layout.levels).map(|l| Level::new(&layout, l)).collect();
     let mut sink = Sink {
+        source_name,
+        feeds,
         writer: &mut writer,
         layout,
         opts,
@@ -225,6 +357,21 @@ pub fn import(
         world,
     };
     let (stored, empty) = (sink.stored, sink.empty);
+    let pyramid = sink
+        .feeds
+        .iter()
+        .enumerate()
+        .rev()
+        .filter_map(|(level, feed)| {
+            feed.as_ref().map(|f| PyramidReuse {
+                level: level as u32,
+                file_level: f.file_level,
+                rms: (f.sum_sq / f.voxels.max(1) as f64).sqrt(),
+                max: f.max,
+                voxels: f.voxels,
+            })
+        })
+        .collect();
     let file_bytes = writer.finish(summary.clone())?;
     Ok(ImportReport {
         nodes: stored + empty,
@@ -235,6 +382,8 @@ pub fn import(
         no_data_voxels: no_data,
         seconds: start.elapsed().as_secs_f64(),
         summary,
+        pyramid,
+        pyramid_unused,
     })
 }
 
@@ -382,6 +531,9 @@ impl Level {
 
 /// Where finished bricks go, with the running figures of the import.
 struct Sink<'a> {
+    source_name: &'a str,
+    /// Per level, the source file's own level that replaces the average.
+    feeds: Vec<Option<FileFeed>>,
     writer: &'a mut OctreeWriter,
     layout: OctreeLayout,
     opts: &'a ImportOptions,
@@ -482,6 +634,10 @@ pub fn label_of(taps: &[f32]) -> f32 {
 }
 
 fn push_slice(levels: &mut [Level], l: usize, slice: Vec<f32>, sink: &mut Sink) -> Result<()> {
+    let slice = match sink.feeds[l].as_mut() {
+        Some(f) => f.take(&slice, levels[l].received, sink.source_name)?,
+        None => slice,
+    };
     let parent_slice = {
         let lv = &mut levels[l];
         let [hx, hy, hz] = lv.halve;

@@ -31,7 +31,7 @@ pub mod writer;
 pub use cells::{Brick, LayerBricks};
 pub use codec::BrickEncoding;
 pub use format::{Header, NodeRecord, Summary, MAX_LABELS};
-pub use import::{import, ImportOptions, ImportReport};
+pub use import::{import, ImportOptions, ImportReport, PyramidReuse};
 pub use info::label_list;
 pub use layout::{NodeKey, OctreeLayout, OVERLAP};
 pub use reader::OctreeDb;

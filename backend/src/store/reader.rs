@@ -9,7 +9,7 @@ use super::format::{
     CELLS_VERSION, FOOTER_LEN, LABELS_VERSION, MAGIC, MAX_LABELS, OLDEST_VERSION, PREAMBLE_LEN,
     SPLITS_VERSION, VERSION, WORLD_VERSION,
 };
-use super::layout::{NodeKey, OctreeLayout};
+use super::layout::{NodeKey, OctreeLayout, OVERLAP};
 use anyhow::{bail, Context, Result};
 use std::collections::HashMap;
 use std::fs::File;
@@ -276,6 +276,39 @@ impl OctreeDb {
     /// An empty (not stored) node decodes to `None`.
     pub fn read_brick(&self, key: NodeKey) -> Result<Option<Vec<f32>>> {
         Ok(self.read_brick_cells(key)?.map(|b| b.values))
+    }
+
+    /// A whole level's voxels, reassembled from its bricks' interiors (x
+    /// fastest, `layout().level_dims(level)` of them); an empty node's are
+    /// NaN. For tests and checks of what import stored.
+    pub fn read_level(&self, level: u32) -> Result<Vec<f32>> {
+        let l = &self.header.layout;
+        let (d, nb, b, side) = (
+            l.level_dims(level),
+            l.level_bricks(level),
+            l.brick,
+            l.stored_side(),
+        );
+        let mut grid = vec![f32::NAN; d[0] * d[1] * d[2]];
+        for z in 0..nb[2] {
+            for y in 0..nb[1] {
+                for x in 0..nb[0] {
+                    let key = NodeKey::new(level as u8, x as u32, y as u32, z as u32);
+                    let Some(v) = self.read_brick(key)? else {
+                        continue;
+                    };
+                    for k in 0..b.min(d[2] - z * b) {
+                        for j in 0..b.min(d[1] - y * b) {
+                            let row = ((k + OVERLAP) * side + j + OVERLAP) * side + OVERLAP;
+                            let n = b.min(d[0] - x * b);
+                            let at = ((z * b + k) * d[1] + y * b + j) * d[0] + x * b;
+                            grid[at..at + n].copy_from_slice(&v[row..row + n]);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(grid)
     }
 
     /// [`read_brick`](Self::read_brick) with the brick's macrocell ranges
