@@ -9,11 +9,12 @@ cd "$(dirname "$0")/.."
 # presented windows are tested on an X server of their own (Xvfb).
 PARALLAX_EXTRA_PACKAGES="python3-pydicom python3-tifffile python3-numpy python3-venv chromium xvfb libxcb1" . scripts/setup.sh
 # The OME-Zarr images of tests/zarr.rs come from the ome-zarr and zarr
-# packages (not in Debian 12), pinned, in a virtual environment of their own.
-if ! target/py-zarr/bin/python -c "import ome_zarr, zarr, numcodecs" 2>/dev/null; then
+# packages (not in Debian 12), its 4-D NIfTI from nibabel, pinned, in a
+# virtual environment of their own.
+if ! target/py-zarr/bin/python -c "import ome_zarr, zarr, numcodecs, nibabel" 2>/dev/null; then
   rm -rf target/py-zarr
   /usr/bin/python3 -m venv target/py-zarr
-  target/py-zarr/bin/pip install -q zarr==3.1.6 ome-zarr==0.18.0 numcodecs==0.16.6
+  target/py-zarr/bin/pip install -q zarr==3.1.6 ome-zarr==0.18.0 numcodecs==0.16.6 nibabel==5.3.2
 fi
 cargo build --release --locked 2>&1 | tail -n 3
 log=$(mktemp)

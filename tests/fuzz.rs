@@ -522,6 +522,7 @@ fn wire_seeds() {
         pick: Some([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]),
         grow: Some(0.05),
         layers: Vec::new(),
+        step: 0,
     };
     let tools = vec![
         Tool::ClipPlane(ClipPlane {

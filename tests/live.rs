@@ -979,10 +979,30 @@ fn a_real_browser_drags_the_volume_round() {
         "[[point]]\nvalue = 200\ncolor = [1, 0.1, 0.1]\nextinction = 0\n[[point]]\nvalue = 255\ncolor = [1, 0.1, 0.1]\nextinction = 0.2\n",
     )
     .unwrap();
+    // A series of two steps (the world's volume, then shells), whose Time
+    // section the page shows.
+    run(&[
+        "synth",
+        "shells",
+        "--size",
+        "48",
+        "-o",
+        s(&w.path("shells.nrrd")),
+    ]);
+    run(&[
+        "import",
+        s(&w.path("shells.nrrd")),
+        "-o",
+        s(&w.path("shells.pxo")),
+        "--brick",
+        "16",
+    ]);
     let scene = w.path("desktop-layers.toml");
     std::fs::write(
         &scene,
-        std::fs::read_to_string(w.path("desktop-scene.toml")).unwrap()
+        std::fs::read_to_string(w.path("desktop-scene.toml"))
+            .unwrap()
+            .replace("volume = \"v.pxo\"", "series = [\"v.pxo\", \"shells.pxo\"]")
             + "[[layer]]\nvolume = \"v.pxo\"\ntransfer_function = \"red.toml\"\n",
     )
     .unwrap();
@@ -1177,6 +1197,25 @@ fn a_real_browser_drags_the_volume_round() {
             while observer.state["layer_tfs"][0]["point"][1]["extinction"] != json!(0.05) {
                 assert!(start.elapsed() < WAIT, "the page's layer function edit never reached the server");
                 observer.next_text().await;
+            }
+            // The Time section: its slider draws step 1, its button plays
+            // and pauses the series.
+            assert_eq!(cdp.eval("document.getElementById('timesec').hidden").await, json!(false));
+            assert_eq!(cdp.eval("document.getElementById('timestep').max").await, json!("1"));
+            cdp.eval("(() => { const s = document.getElementById('timestep'); s.value = 1; s.dispatchEvent(new Event('input')); return ''; })()").await;
+            let start = Instant::now();
+            while observer.state["time"]["step"] != json!(1) {
+                assert!(start.elapsed() < WAIT, "the page's time slider never reached the server");
+                observer.next_text().await;
+            }
+            for playing in [true, false] {
+                cdp.eval("(() => { document.getElementById('timeplay').click(); return ''; })()").await;
+                let start = Instant::now();
+                while observer.state["time"]["playing"] != json!(playing) {
+                    assert!(start.elapsed() < WAIT, "the page's play button never reached the server");
+                    observer.next_text().await;
+                }
+                tokio::time::sleep(Duration::from_millis(300)).await;
             }
             cdp.session = None;
             let _ = cdp.call("Browser.close", json!({})).await;
@@ -1988,6 +2027,86 @@ fn a_layers_visibility_and_opacity_change_live() {
             (json!({"type": "layer-tf", "index": 0, "point": [
                 {"value": 0, "color": [0, 0, 0], "extinction": -1},
                 {"value": 1, "color": [0, 0, 0], "extinction": 1}]}), "extinction"),
+        ] {
+            a.send(bad.clone()).await;
+            let e = a.error().await;
+            assert!(e.contains(says), "{bad} → {e}");
+        }
+        a.send(json!({"type": "quit"})).await;
+    });
+    server.join().unwrap().unwrap();
+}
+
+#[test]
+fn a_series_steps_and_plays_live() {
+    std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    let w = World::new([96, 72]);
+    // Three steps on one grid: the world's Shepp–Logan, then shells, then
+    // Marschner–Lobb, 48³ in bricks of 16.
+    for (i, kind) in ["shells", "marschner-lobb"].iter().enumerate() {
+        let (nrrd, pxo) = (
+            w.path(&format!("{kind}.nrrd")),
+            w.path(&format!("s{}.pxo", i + 1)),
+        );
+        run(&["synth", kind, "--size", "48", "-o", s(&nrrd)]);
+        run(&["import", s(&nrrd), "-o", s(&pxo), "--brick", "16"]);
+    }
+    let scene = w.path("series-scene.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("desktop-scene.toml"))
+            .unwrap()
+            .replace(
+                "volume = \"v.pxo\"",
+                "series = [\"v.pxo\", \"s1.pxo\", \"s2.pxo\"]",
+            ),
+    )
+    .unwrap();
+    let (url, server) = serve_in_process(scene, 1);
+    runtime().block_on(async {
+        let mut a = Client::connect(&url).await;
+        assert_eq!(a.state["steps"], json!(3));
+        assert_eq!(
+            a.state["time"],
+            json!({"step": 0, "playing": false, "rate": 2.0})
+        );
+        let first = a.settled(1).await.pixels();
+        let v = a.change(json!({"type": "time", "step": 2})).await;
+        let last = a.settled(v).await.pixels();
+        let v = a.change(json!({"type": "time", "step": 0})).await;
+        let again = a.settled(v).await.pixels();
+        println!(
+            "series live: step 0 vs 2 {:.3}, step 0 again {:.3}",
+            diff(&first, &last),
+            diff(&first, &again)
+        );
+        assert!(diff(&first, &last) > 2.0, "another step, another image");
+        assert_eq!(first, again, "the same step, the same image");
+        // Playing at 10 steps a second: the step advances by itself, in
+        // order, wrapping after the last.
+        a.change(json!({"type": "time", "playing": true, "rate": 10.0}))
+            .await;
+        let mut seen = vec![a.state["time"]["step"].as_u64().unwrap()];
+        let until = std::time::Instant::now() + Duration::from_secs(60);
+        while seen.len() < 8 && std::time::Instant::now() < until {
+            let m = a.next_text().await;
+            if m["type"] == "frame" {
+                a.ws.next().await;
+            }
+            let step = a.state["time"]["step"].as_u64().unwrap();
+            if *seen.last().unwrap() != step {
+                seen.push(step);
+            }
+        }
+        println!("series live: steps while playing {seen:?}");
+        assert!(seen.len() >= 8, "{seen:?}");
+        assert!(seen.windows(2).all(|p| p[1] == (p[0] + 1) % 3), "{seen:?}");
+        let v = a.change(json!({"type": "time", "playing": false})).await;
+        assert_eq!(a.state["time"]["playing"], json!(false));
+        a.settled(v).await;
+        for (bad, says) in [
+            (json!({"type": "time", "step": 3}), "time.step 3"),
+            (json!({"type": "time", "rate": 0.0}), "time.rate"),
         ] {
             a.send(bad.clone()).await;
             let e = a.error().await;

@@ -785,3 +785,220 @@ fn a_rank_reading_another_copy_of_the_volume_stops_the_run() {
         t.elapsed()
     );
 }
+
+/// A 20-step time series on the wall's grid: a 48³ u8 volume of a bright
+/// blob over a faint background, the blob moving 1 voxel a step along x,
+/// each step imported with bricks of 16 (`series/s00.pxo` …), and a scene
+/// naming them; a script plays them at 2 frames a step.
+fn series_world(steps: usize) -> (World, PathBuf, PathBuf) {
+    let w = World::new();
+    let n = 48usize;
+    let mut series = Vec::new();
+    for t in 0..steps {
+        let c = [14.0 + t as f64, 24.0, 24.0];
+        let mut v = Vec::with_capacity(n * n * n);
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    let r2 = (i as f64 - c[0]).powi(2)
+                        + (j as f64 - c[1]).powi(2)
+                        + (k as f64 - c[2]).powi(2);
+                    v.push((40.0 + 210.0 * (-r2 / 72.0).exp()).round() as u8);
+                }
+            }
+        }
+        let raw = w.path(&format!("s{t:02}.raw"));
+        std::fs::write(&raw, v).unwrap();
+        let pxo = format!("s{t:02}.pxo");
+        let o = run(&[
+            "import",
+            s(&raw),
+            "--dims",
+            "48,48,48",
+            "--type",
+            "u8",
+            "--brick",
+            "16",
+            "-o",
+            s(&w.path(&pxo)),
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+        series.push(format!("\"{pxo}\""));
+    }
+    let scene = w.path("series.toml");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(w.path("scene.toml"))
+            .unwrap()
+            .replace(
+                "volume = \"v.pxo\"",
+                &format!("series = [{}]", series.join(", ")),
+            ),
+    )
+    .unwrap();
+    let script = w.path("play.toml");
+    std::fs::write(
+        &script,
+        format!(
+            "frames = {}\n[[key]]\nframe = 0\ntime = 0\n[[key]]\nframe = {}\ntime = {}\n",
+            2 * steps,
+            2 * (steps - 1),
+            steps - 1
+        ),
+    )
+    .unwrap();
+    (w, scene, script)
+}
+
+fn play_args<'a>(out: &'a Path, scene: &'a Path, script: &'a Path, sync: bool) -> Vec<&'a str> {
+    let mut a = vec![
+        "render",
+        "--scene",
+        s(scene),
+        "--script",
+        s(script),
+        "--float",
+        "--out",
+        s(out),
+    ];
+    if sync {
+        a.push("--sync");
+    }
+    a
+}
+
+#[test]
+fn a_time_series_plays_identically_in_the_cluster() {
+    let steps = 20;
+    let (w, scene, script) = series_world(steps);
+    let cluster = w.path("series-cluster");
+    let o = mpirun(3, &play_args(&cluster, &scene, &script, true), &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    let embedded = w.path("series-embedded");
+    let mut args = play_args(&embedded, &scene, &script, true);
+    args.extend(["--backends", "2"]);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", text(&o));
+    for frame in 0..2 * steps as u32 {
+        for id in ["p00", "p01", "p02", "p03"] {
+            assert_eq!(
+                npy(&cluster, frame, id),
+                npy(&embedded, frame, id),
+                "projector {id}, frame {frame}"
+            );
+        }
+    }
+    // The steps are drawn: the blob moves between steps 0, 10 and 19 and
+    // stays within a step (frames 2k and 2k + 1 draw step k, the second
+    // with a cut as fine or finer).
+    let (a, b, c) = (
+        npy(&cluster, 1, "p01"),
+        npy(&cluster, 21, "p01"),
+        npy(&cluster, 39, "p01"),
+    );
+    assert!(a != b && b != c && a != c);
+    // The blob's brightness-weighted x on the image moves one way.
+    let centroid = |img: &[[f32; 4]]| {
+        let (mut sx, mut sw) = (0.0f64, 0.0f64);
+        for (i, p) in img.iter().enumerate() {
+            sx += (i % 48) as f64 * p[0] as f64;
+            sw += p[0] as f64;
+        }
+        sx / sw
+    };
+    let xs = [centroid(&a), centroid(&b), centroid(&c)];
+    assert!(
+        (xs[0] < xs[1] && xs[1] < xs[2]) || (xs[0] > xs[1] && xs[1] > xs[2]),
+        "{xs:?}"
+    );
+    // A step past the series is refused naming the script.
+    let bad = w.path("bad.toml");
+    std::fs::write(&bad, "[[key]]\nframe = 0\ntime = 20\n").unwrap();
+    let o = run(&play_args(&w.path("bad"), &scene, &bad, true));
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("bad.toml: time: step 20") && text(&o).contains("20 time steps"),
+        "{}",
+        text(&o)
+    );
+}
+
+#[test]
+fn a_time_series_with_a_budget_for_one_step_never_shows_a_hole() {
+    // Caches that hold one step's bricks (36 of 48³ in bricks of 16: 1.2
+    // MB in f32, 0.3 in 8 bits), playback without waiting for reads: the
+    // frame after a step change shows the coarser levels it has (the
+    // root at once), never nothing where the volume is.
+    let steps = 20;
+    let (w, scene, script) = series_world(steps);
+    let small = w.path("series-small.toml");
+    std::fs::write(
+        &small,
+        std::fs::read_to_string(&scene).unwrap().replace(
+            "[render]\n",
+            "[render]\ncpu_cache_mb = 1.5\ngpu_cache_mb = 0.6\n",
+        ),
+    )
+    .unwrap();
+    // Played in order (the next step read ahead), and jumping 5 steps
+    // every 2 frames (what was read ahead is never the step drawn next).
+    let jump = w.path("jump.toml");
+    let keys: String = (0..4)
+        .flat_map(|k| [(2 * k, 5 * k), (2 * k + 1, 5 * k)])
+        .map(|(f, t)| format!("[[key]]\nframe = {f}\ntime = {t}\n"))
+        .collect();
+    std::fs::write(&jump, keys).unwrap();
+    for (name, script, frames) in [("play", &script, 2 * steps as u32), ("jump", &jump, 8)] {
+        let reference = w.path(&format!("{name}-sync"));
+        let o = run(&play_args(&reference, &small, script, true));
+        assert!(o.status.success(), "{}", text(&o));
+        let played = w.path(&format!("{name}-async"));
+        let o = run(&play_args(&played, &small, script, false));
+        assert!(o.status.success(), "{}", text(&o));
+        no_holes(&reference, &played, frames, name);
+    }
+}
+
+/// Every frame of `played` draws the volume wherever the frame of
+/// `reference` does (its coarser levels, if its bricks have not arrived),
+/// and draws bricks.
+fn no_holes(reference: &Path, played: &Path, frames: u32, name: &str) {
+    let mut coarse_frames = 0;
+    for frame in 0..frames {
+        for id in ["p00", "p01", "p02", "p03"] {
+            let (r, p) = (npy(reference, frame, id), npy(played, frame, id));
+            // Of the pixels where the reference sees the volume, the
+            // played frame sees it too.
+            let seen = r.iter().filter(|q| q[3] > 0.05).count();
+            let kept = r
+                .iter()
+                .zip(&p)
+                .filter(|(q, x)| q[3] > 0.05 && x[3] > 0.01)
+                .count();
+            assert!(
+                seen > 0,
+                "{name}: frame {frame} {id}: the reference sees the volume"
+            );
+            assert!(
+                kept * 100 >= seen * 97,
+                "{name}: frame {frame} {id}: {kept} of the {seen} pixels the volume covers are drawn"
+            );
+            coarse_frames += (r != p) as usize;
+        }
+    }
+    let stats = stats_lines(played);
+    assert!(
+        stats
+            .iter()
+            .all(|s| s["cut_leaves_with_data"].as_u64() > Some(0)),
+        "{name}: every frame draws bricks"
+    );
+    let roots = stats
+        .iter()
+        .filter(|s| s["cut_nodes"].as_u64() == Some(1))
+        .count();
+    eprintln!(
+        "{name}: {coarse_frames} of {} images differ from the reference; {roots} frames drew the root alone",
+        4 * frames
+    );
+}

@@ -4,7 +4,9 @@
 //! axes, imported to the arrays' own voxels and spacing; and the damaged
 //! files, each refused (or, for a missing chunk, filled and said) naming
 //! the file and the array. The test command installs the writers in
-//! `target/py-zarr` (scripts/test.sh).
+//! `target/py-zarr` (scripts/test.sh). Also time series: a 4-D NIfTI
+//! written by nibabel and an OME-Zarr image's `t` axis imported as a
+//! scene's series (`--all-times`).
 
 use parallax_backend::data::zarr::ZarrSelect;
 use parallax_backend::data::{self, InputOptions};
@@ -288,7 +290,10 @@ fn damaged_files_and_bad_choices_are_refused_naming_the_file_and_the_array() {
     let nrrd = dir.join("v.nrrd");
     std::fs::write(&nrrd, "NRRD0004\n").unwrap();
     let e = open_err(&nrrd, &select(1, None, None));
-    assert!(e.contains("not one"), "{e}");
+    assert!(
+        e.contains("v.nrrd: --level, --channel and --time choose within an OME-Zarr image"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -488,4 +493,108 @@ fn the_files_pyramid_becomes_the_octrees_coarser_levels_and_its_difference_is_re
         .iter()
         .zip(&avg)
         .all(|(&s, &a)| (s as f64 - a).abs() < 1e-2));
+}
+
+/// `parallax import … --all-times -o DIR`: every time point into
+/// DIR/tNNNN.pxo; returns the run's stdout.
+fn import_all_times(input: &Path, out: &Path, extra: &[&str]) -> String {
+    let _ = std::fs::remove_dir_all(out);
+    let o = Command::new(env!("CARGO_BIN_EXE_parallax"))
+        .arg("import")
+        .arg(input)
+        .args(["--all-times", "--quantize", "none", "--brick", "8", "-o"])
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).to_string()
+}
+
+fn leaf_values(pxo: &Path) -> Vec<f32> {
+    let db = parallax_backend::store::OctreeDb::open(pxo).unwrap();
+    db.read_level(db.layout().leaf_level()).unwrap()
+}
+
+#[test]
+fn every_time_point_of_a_4d_nifti_and_of_an_ome_zarr_t_axis_imports_as_a_series() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("series-4d");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // nibabel writes a gzip 4-D NIfTI: 6 × 5 × 4 voxels of 0.5 × 0.75 × 2
+    // mm, 3 time points, each its own values; beside it each time point
+    // as raw f32, x fastest.
+    let script = r#"
+import sys, numpy as np, nibabel as nib
+d = sys.argv[1]
+x, y, z = np.meshgrid(np.arange(6), np.arange(5), np.arange(4), indexing="ij")
+vol = np.stack([(x * 3 + y * 17 + z * 101) * (t + 1) - 700 * t for t in range(3)], axis=-1).astype(np.int16)
+img = nib.Nifti1Image(vol, np.diag([0.5, 0.75, 2.0, 1.0]))
+img.header.set_xyzt_units("mm", "sec")
+nib.save(img, d + "/scan4d.nii.gz")
+for t in range(3):
+    vol[..., t].astype("<f4").flatten(order="F").tofile(d + f"/t{t}.raw")
+"#;
+    let o = Command::new(python())
+        .args(["-c", script])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = import_all_times(&dir.join("scan4d.nii.gz"), &dir.join("nii"), &[]);
+    assert!(stdout.contains("3 time points in"), "{stdout}");
+    assert!(stdout.contains("series = ["), "{stdout}");
+    for t in 0..3 {
+        let want: Vec<f32> = std::fs::read(dir.join(format!("t{t}.raw")))
+            .unwrap()
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        let pxo = dir.join(format!("nii/t{t:04}.pxo"));
+        assert_eq!(leaf_values(&pxo), want, "time point {t}");
+        let db = parallax_backend::store::OctreeDb::open(&pxo).unwrap();
+        assert_eq!(db.header.info.spacing, [0.5, 0.75, 2.0]);
+    }
+    // One time point by --time, and one past the end refused.
+    let one = dir.join("t2.pxo");
+    let o = Command::new(env!("CARGO_BIN_EXE_parallax"))
+        .arg("import")
+        .arg(dir.join("scan4d.nii.gz"))
+        .args(["--time", "2", "--quantize", "none", "--brick", "8", "-o"])
+        .arg(&one)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("time point 2 of 3"), "{err}");
+    assert_eq!(leaf_values(&one), leaf_values(&dir.join("nii/t0002.pxo")));
+    let o = Command::new(env!("CARGO_BIN_EXE_parallax"))
+        .arg("import")
+        .arg(dir.join("scan4d.nii.gz"))
+        .args(["--time", "3", "-o"])
+        .arg(dir.join("t3.pxo"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("scan4d.nii.gz") && err.contains("--time 3: dim[4] holds 3 time point(s)"),
+        "{err}"
+    );
+
+    // The OME-Zarr image with a t axis (2 points) and a channel axis.
+    let stdout = import_all_times(
+        &inputs().join("v3-sharded.ome.zarr"),
+        &dir.join("zarr"),
+        &["--channel", "1"],
+    );
+    assert!(stdout.contains("2 time points in"), "{stdout}");
+    for t in 0..2 {
+        let (_, want, _) = expected(&format!("v3-sharded.ome.zarr.s0.t{t}.c1"));
+        assert_eq!(
+            leaf_values(&dir.join(format!("zarr/t{t:04}.pxo"))),
+            want,
+            "time point {t}"
+        );
+    }
 }

@@ -153,6 +153,7 @@ fn handle(
             let mut renderer =
                 Renderer::with_layers(&scene.volume, &scene.layers, &scene.render, &req)?;
             renderer.sync_io = sync_io;
+            renderer.set_series(&scene.series)?;
             let screen = &display.screen;
             renderer.set_lightfield((screen.angular_accuracy_deg > 0.0).then_some(
                 crate::loader::LightField {
@@ -219,6 +220,7 @@ fn handle(
         ToBackend::Frame(state) => {
             fault_injection(link.rank(), state.frame);
             let s = setup.as_mut().context("frame before setup")?;
+            s.renderer.set_step(state.step as usize)?;
             let mut stats = render_frame(s, &state)?;
             stats.rank = link.rank();
             if let (Some([origin, dir]), 1) = (state.pick, link.rank()) {
@@ -476,6 +478,7 @@ mod tests {
             pick: None,
             grow: None,
             layers: Vec::new(),
+            step: 0,
         });
         let mut link = Scripted {
             inbox: VecDeque::from([

@@ -21,7 +21,7 @@ use parallax_common::tf::labels;
 use parallax_common::tf::{EmptinessTable, PreintTable, TransferFunction};
 use parallax_common::tools::{PackContext, Tool, MAX_ENHANCERS};
 use std::collections::VecDeque;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -150,18 +150,9 @@ fn caches(
             );
     }
     let pool = BrickPool::with_channels(gpu, slots, side, float, channels)?;
-    let layer_sources = layers
-        .iter()
-        .map(|l| LayerSource {
-            db: l.db.clone(),
-            empty: l.empty.clone(),
-            transform: l.transform,
-            nearest: l.spec.is_labels(),
-        })
-        .collect();
     let loader = Loader::with_layers(
         db.clone(),
-        layer_sources,
+        layer_sources(layers),
         LoaderConfig {
             cpu_budget_bytes: cpu_budget,
             gpu_slots: slots,
@@ -173,6 +164,53 @@ fn caches(
         },
     );
     Ok((raycaster, pool, loader))
+}
+
+/// The loader's view of the layers drawn.
+fn layer_sources(layers: &[ActiveLayer]) -> Vec<LayerSource> {
+    layers
+        .iter()
+        .map(|l| LayerSource {
+            db: l.db.clone(),
+            empty: l.empty.clone(),
+            transform: l.transform,
+            nearest: l.spec.is_labels(),
+        })
+        .collect()
+}
+
+/// The smallest and largest variance of a database's stored bricks (B10
+/// §4.5).
+fn variance_range(db: &OctreeDb) -> (f32, f32) {
+    db.nodes
+        .iter()
+        .filter(|n| n.is_stored() && n.variance.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), n| {
+            (lo.min(n.variance), hi.max(n.variance))
+        })
+}
+
+/// Time step `i` of a series, opened and checked to lie on the grid of
+/// `first` (the same voxels, spacing, bricks and encoding: the steps share
+/// the loader's geometry, the GPU pool and the ray caster).
+fn open_step(path: &Path, i: usize, first: &OctreeDb) -> Result<Arc<OctreeDb>> {
+    let db = OctreeDb::open(path).with_context(|| format!("series[{i}]"))?;
+    let (a, b) = (&db.header, &first.header);
+    if a.layout != b.layout || a.info.spacing != b.info.spacing || a.encoding != b.encoding {
+        bail!(
+            "{}: series[{i}]: {:?} voxels of {:?} in bricks of {} ({}), but the series' first step has {:?} of {:?} in bricks of {} ({}): every step must lie on one grid",
+            path.display(),
+            a.info.dims,
+            a.info.spacing,
+            a.layout.brick,
+            a.encoding.name(),
+            b.info.dims,
+            b.info.spacing,
+            b.layout.brick,
+            b.encoding.name()
+        );
+    }
+    Ok(Arc::new(db))
 }
 
 /// The scene's `[[layer]]`s the renderer draws, opened and checked against
@@ -297,7 +335,19 @@ pub struct Renderer {
     raycaster: Raycaster,
     pool: BrickPool,
     loader: Loader,
+    /// The database drawn: the scene's volume, or its series' current step.
     db: Arc<OctreeDb>,
+    /// A time series: each step's database (the scene's `series`), and the
+    /// step drawn.
+    series: Vec<PathBuf>,
+    step: usize,
+    /// The next step's loader, reading ahead what the drawn step's cut
+    /// holds (`Loader::prefetch`); it becomes the loader at that step.
+    next: Option<(usize, Loader)>,
+    /// The data values the tables span: the volume's range, or the union
+    /// of every step's, so that a transfer function maps a value the same
+    /// way in every step.
+    value_range: (f32, f32),
     tf: Option<ActiveTf>,
     /// Recent frames' index and visibility feedback, newest last: one frame
     /// (G10 §5), or one per sub-frame with frame reconstruction.
@@ -342,6 +392,9 @@ pub struct Renderer {
     /// Fetch samples one pass ahead on float pools with the 2D table (on
     /// unless a test compares against the plain loop).
     pub lookahead: bool,
+    /// A series: read the next step's bricks ahead while drawing this one
+    /// (on unless `parallax bench series` compares against it).
+    pub prefetch: bool,
 }
 
 /// A rendered frame: one premultiplied RGBA image per view, and its figures.
@@ -392,13 +445,8 @@ impl Renderer {
         }
         let gpu = Gpu::with_request(req)?;
         let (raycaster, pool, loader) = caches(&gpu, &db, &layers, cfg)?;
-        let variance_range = db
-            .nodes
-            .iter()
-            .filter(|n| n.is_stored() && n.variance.is_finite())
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), n| {
-                (lo.min(n.variance), hi.max(n.variance))
-            });
+        let variance_range = variance_range(&db);
+        let value_range = (db.summary.value_min, db.summary.value_max);
         let reconstruct_on_gpu = gpu.info.device_type != wgpu::DeviceType::Cpu;
         Ok(Renderer {
             layers,
@@ -410,6 +458,10 @@ impl Renderer {
             pool,
             loader,
             db,
+            series: Vec::new(),
+            step: 0,
+            next: None,
+            value_range,
             tf: None,
             last: VecDeque::new(),
             history: Vec::new(),
@@ -426,6 +478,7 @@ impl Renderer {
             count_samples: false,
             tile_culling: true,
             lookahead: true,
+            prefetch: true,
         })
     }
 
@@ -433,6 +486,9 @@ impl Renderer {
     /// (their level of detail follows s(z), G10 §4).
     pub fn set_lightfield(&mut self, lightfield: Option<crate::loader::LightField>) {
         self.loader.set_lightfield(lightfield);
+        if let Some((_, next)) = self.next.as_mut() {
+            next.set_lightfield(lightfield);
+        }
     }
 
     /// The ray caster's image buffer, holding the last frame's views
@@ -454,11 +510,114 @@ impl Renderer {
         &self.db
     }
 
+    /// Makes the renderer draw a time series (a scene's `series`; its first
+    /// step is the database the renderer was opened on): every step is
+    /// opened and checked to lie on the first one's grid, and the tables
+    /// span the union of their value ranges. Call before the transfer
+    /// function is installed.
+    pub fn set_series(&mut self, series: &[PathBuf]) -> Result<()> {
+        if series.len() <= 1 {
+            return Ok(());
+        }
+        let (mut lo, mut hi) = self.value_range;
+        let (mut v_lo, mut v_hi) = self.variance_range;
+        for (i, p) in series.iter().enumerate().skip(1) {
+            let db = open_step(p, i, &self.db)?;
+            lo = lo.min(db.summary.value_min);
+            hi = hi.max(db.summary.value_max);
+            let (a, b) = variance_range(&db);
+            (v_lo, v_hi) = (v_lo.min(a), v_hi.max(b));
+        }
+        self.series = series.to_vec();
+        self.step = 0;
+        self.value_range = (lo, hi);
+        self.variance_range = (v_lo, v_hi);
+        self.series_loaders(None)?;
+        if let Some(tf) = self.tf.take() {
+            self.set_transfer_function(tf.version, &tf.function)?;
+        }
+        Ok(())
+    }
+
+    /// A series' loaders: the drawn step's (`current`, or a new one on
+    /// `self.db`) and the next step's, reading ahead, each with half of
+    /// `render.cpu_cache_mb`: playing, the CPU cache holds the drawn step's
+    /// bricks and the next one's.
+    fn series_loaders(&mut self, current: Option<Loader>) -> Result<()> {
+        let mut cfg = self.loader.config().clone();
+        let total = (self.budgets.cpu_cache_mb * (1 << 20) as f64) as u64;
+        cfg.cpu_budget_bytes = total / 2;
+        let layout = self.db.layout();
+        let brick_bytes =
+            layout.stored_len() as u64 * 4 * BrickPool::channels_for(self.layers.len()) as u64;
+        let min_bricks = if layout.levels > 1 { 8 } else { 1 };
+        if cfg.cpu_budget_bytes < min_bricks * brick_bytes {
+            bail!(
+                "render.cpu_cache_mb = {}: too small for a series: half of it holds the drawn step's bricks and half the next step's, and each half must hold {min_bricks} bricks; the smallest that works is {:.2}",
+                self.budgets.cpu_cache_mb,
+                (2.0 * (min_bricks * brick_bytes) as f64 / (1 << 20) as f64 * 100.0).ceil() / 100.0
+            );
+        }
+        let mut loader = match current {
+            Some(l) => l,
+            None => self.step_loader(self.db.clone(), &cfg),
+        };
+        loader.load_root();
+        self.loader = loader;
+        let n = (self.step + 1) % self.series.len();
+        let db = open_step(&self.series[n], n, &self.db)?;
+        self.next = Some((n, self.step_loader(db, &cfg)));
+        Ok(())
+    }
+
+    /// A loader on one step's database, configured as the drawn one.
+    fn step_loader(&self, db: Arc<OctreeDb>, cfg: &LoaderConfig) -> Loader {
+        let mut loader = Loader::with_layers(db, layer_sources(&self.layers), cfg.clone());
+        loader.set_lightfield(self.loader.lightfield());
+        loader
+    }
+
+    /// The time steps this renderer draws (1 without a series).
+    pub fn steps(&self) -> usize {
+        self.series.len().max(1)
+    }
+
+    /// Draws time step `step` of the series from the next frame on: its
+    /// database replaces the last step's in the loader, whose caches start
+    /// empty (the GPU pool, the ray caster and the tables stay). Until its
+    /// bricks arrive the cut holds the coarser levels it has, from the root
+    /// (read at once), never a hole.
+    pub fn set_step(&mut self, step: usize) -> Result<()> {
+        if step == self.step {
+            return Ok(());
+        }
+        if step >= self.steps() {
+            bail!("time step {step}: the scene has {} step(s)", self.steps());
+        }
+        // The loader that read ahead for this step, or a new one.
+        let loader = match self.next.take() {
+            Some((n, l)) if n == step => l,
+            _ => {
+                let db = open_step(&self.series[step], step, &self.db)?;
+                self.step_loader(db, self.loader.config())
+            }
+        };
+        self.db = loader.db().clone();
+        self.step = step;
+        self.series_loaders(Some(loader))?;
+        self.last.clear();
+        self.history.clear();
+        self.history_key = None;
+        self.prediction = None;
+        self.pick_volume = None;
+        self.cells_stale = true;
+        Ok(())
+    }
+
     /// Installs a transfer function: pre-integration table over the
     /// dataset's value range (G10 §4) and its emptiness table (G08 §4).
     pub fn set_transfer_function(&mut self, version: u64, tf: &TransferFunction) -> Result<()> {
-        let s = &self.db.summary;
-        let (lo, hi) = (s.value_min as f64, s.value_max as f64);
+        let (lo, hi) = (self.value_range.0 as f64, self.value_range.1 as f64);
         let integer = !self.db.header.info.voxel_type.is_float();
         let bins = PreintTable::suggested_bins(lo, hi, integer);
         let table = PreintTable::new(tf, lo, hi, bins)?;
@@ -847,6 +1006,9 @@ impl Renderer {
         self.raycaster = raycaster;
         self.pool = pool;
         self.loader = loader;
+        if self.series.len() > 1 {
+            self.series_loaders(None)?;
+        }
         self.last.clear();
         self.history.clear();
         self.history_key = None;
@@ -939,6 +1101,22 @@ impl Renderer {
         for b in &stats.bad_bricks {
             tracing::warn!("{b}: its parent stays a leaf");
         }
+        if let Some((_, next)) = self.next.as_mut().filter(|_| self.prefetch) {
+            // A series: the next step reads ahead the bricks this one
+            // draws, coarsest first (waiting for them with --sync, so that
+            // a frame depends only on the frames before it).
+            let mut keys: Vec<NodeKey> = cut
+                .cut
+                .iter()
+                .filter(|(_, n)| n.slot.is_some())
+                .map(|(&k, _)| k)
+                .collect();
+            keys.sort_unstable();
+            stats.prefetched = next.prefetch(&keys) as u64;
+            if self.sync_io {
+                next.wait_idle();
+            }
+        }
         stats.refine_ms = ms(t);
 
         let t = Instant::now();
@@ -946,8 +1124,7 @@ impl Renderer {
         stats.upload_ms = ms(t);
 
         let t = Instant::now();
-        let s = &self.db.summary;
-        let index = SpatialIndex::build(self.db.layout(), &cut.cut, (s.value_min, s.value_max))?;
+        let index = SpatialIndex::build(self.db.layout(), &cut.cut, self.value_range)?;
         stats.index_ms = ms(t);
 
         let scene = self.geometry(placement);
@@ -1103,7 +1280,7 @@ impl Renderer {
             .context("render: no transfer function set")?;
         let (v_lo, v_hi) = self.variance_range;
         let layered = !self.layers.is_empty();
-        let fills: Vec<f32> = std::iter::once(self.db.summary.value_min)
+        let fills: Vec<f32> = std::iter::once(self.value_range.0)
             .chain(self.layers.iter().map(|l| l.fill))
             .collect();
         // A macrocell is empty where every medium with data there is: the

@@ -172,6 +172,11 @@ pub trait VolumeSource {
     fn buffer_bytes(&self) -> u64 {
         0
     }
+    /// The time points the file holds (a 4-D NIfTI's `dim[4]`, an
+    /// OME-Zarr image's `t` axis); one is read, chosen by `--time`.
+    fn time_points(&self) -> usize {
+        1
+    }
     /// The coarser resolution levels the file itself holds beside the one
     /// read (an OME-Zarr pyramid), finest first: import takes those that
     /// halve the volume as the octree does instead of averaging its own

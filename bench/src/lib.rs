@@ -28,5 +28,6 @@ pub mod measure;
 mod plot;
 pub mod seams;
 pub mod sequence;
+pub mod series;
 pub mod sweep;
 pub mod tools;

@@ -282,9 +282,16 @@ impl Default for RenderConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scene {
-    /// The octree database (relative to the scene file).
-    #[serde(with = "crate::paths::bytes")]
+    /// The octree database (relative to the scene file). With `series`, its
+    /// first step (leave `volume` out).
+    #[serde(default, with = "crate::paths::bytes")]
     pub volume: PathBuf,
+    /// A time series: one database per time step, in order (relative to
+    /// the scene file), all on one grid (dimensions, bricks, spacing); a
+    /// frame draws the step its state names (`FrameState::step`, moved by
+    /// scripts and the live page).
+    #[serde(default, with = "crate::paths::list_bytes")]
+    pub series: Vec<PathBuf>,
     /// The transfer function file (relative to the scene file).
     #[serde(with = "crate::paths::bytes")]
     pub transfer_function: PathBuf,
@@ -301,6 +308,16 @@ pub struct Scene {
     /// own transfer function, combined with it as media (G10 §4).
     #[serde(default, rename = "layer")]
     pub layers: Vec<Layer>,
+}
+
+/// The most time steps a scene's `series` may list.
+pub const MAX_SERIES: usize = 100_000;
+
+/// The steps of a scene: its series' length, or 1 for one volume.
+impl Scene {
+    pub fn steps(&self) -> usize {
+        self.series.len().max(1)
+    }
 }
 
 /// The most `[[layer]]`s a scene may add to its volume: the kernel reads
@@ -570,7 +587,26 @@ impl Scene {
     pub fn load(path: &Path) -> Result<Self> {
         let mut s: Scene = read_toml(path)?;
         let f = path;
+        match (s.volume.as_os_str().is_empty(), s.series.first()) {
+            (true, None) => bail!("{}: volume: missing (the scene's database)", f.display()),
+            (false, Some(_)) => bail!(
+                "{}: give either volume (one database) or series (one per time step), not both",
+                f.display()
+            ),
+            (true, Some(first)) => s.volume = first.clone(),
+            (false, None) => {}
+        }
+        if s.series.len() > MAX_SERIES {
+            bail!(
+                "{}: series: {} steps; a series has at most {MAX_SERIES}",
+                f.display(),
+                s.series.len()
+            );
+        }
         s.volume = resolve(path, &s.volume);
+        for p in &mut s.series {
+            *p = resolve(path, p);
+        }
         s.transfer_function = resolve(path, &s.transfer_function);
         s.display = s.display.map(|d| resolve(path, &d));
         for l in &mut s.layers {
@@ -1033,7 +1069,7 @@ mod tests {
     fn bad_files_name_file_and_field() {
         let d = tempfile::tempdir().unwrap();
         let cases = [
-            ("[placement]\ncenter = [0, 0, 0]\nsize = 0.2\n", "volume"),
+            ("transfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = 0.2\n", "volume: missing"),
             ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = -1\n", "placement.size"),
             ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = 1\n[render]\naccuracy = 0\n", "render.accuracy"),
             ("volume = \"v\"\ntransfer_function = \"t\"\n[placement]\ncenter = [0, 0, 0]\nsize = 1\n[render]\nstepfactor = 1\n", "stepfactor"),

@@ -75,6 +75,32 @@ pub mod opt_bytes {
     }
 }
 
+/// `#[serde(with = "paths::list_bytes")]` for a `Vec<PathBuf>` field.
+pub mod list_bytes {
+    use super::*;
+
+    struct Wrap(PathBuf);
+    impl serde::Serialize for Wrap {
+        fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+            bytes::serialize(&self.0, s)
+        }
+    }
+    impl<'de> serde::Deserialize<'de> for Wrap {
+        fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+            bytes::deserialize(d).map(Wrap)
+        }
+    }
+
+    pub fn serialize<S: Serializer>(p: &[PathBuf], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(p.iter().map(|p| Wrap(p.clone())))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<PathBuf>, D::Error> {
+        let v: Vec<Wrap> = serde::Deserialize::deserialize(d)?;
+        Ok(v.into_iter().map(|w| w.0).collect())
+    }
+}
+
 struct PathVisitor;
 
 impl<'de> Visitor<'de> for PathVisitor {

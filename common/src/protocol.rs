@@ -49,6 +49,9 @@ pub struct FrameState {
     /// them, in `[[layer]]` order; empty: as the scene file says.
     #[serde(default)]
     pub layers: Vec<LayerControl>,
+    /// The time step of the scene's `series` drawn (0 without one).
+    #[serde(default)]
+    pub step: u32,
 }
 
 /// What the live page and scripts change of a registered layer
@@ -128,7 +131,7 @@ pub enum ToBackend {
 
 /// The version of these messages: a rank that speaks another is named
 /// before the first frame.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 
 /// This build: the workspace's version and the commit it was built from.
 pub const BUILD: &str = concat!(env!("CARGO_PKG_VERSION"), " ", env!("PARALLAX_BUILD"));
@@ -168,6 +171,10 @@ pub struct FrameStats {
     pub uploaded: u64,
     pub visible: u64,
     pub requested: u64,
+    /// A series: reads the next step's loader posted this frame, reading
+    /// ahead what this step draws.
+    #[serde(default)]
+    pub prefetched: u64,
     pub cache_hits: u64,
     pub cache_misses: u64,
     /// Bytes read from the database so far.
@@ -478,6 +485,7 @@ mod tests {
             pick: None,
             grow: None,
             layers: Vec::new(),
+            step: 0,
         };
         let msg = ToBackend::Frame(s.clone());
         let b = encode(&msg).unwrap();
@@ -568,6 +576,7 @@ mod tests {
             pick: None,
             grow: None,
             layers: Vec::new(),
+            step: 0,
         };
         t.broadcast(&ToBackend::Frame(f)).unwrap();
         let stats = t.gather().unwrap();

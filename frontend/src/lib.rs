@@ -156,6 +156,18 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             );
         }
     }
+    if let (Some(sc), Some(path)) = (&script, &opts.script) {
+        if sc.last_time() as usize >= scene.steps() {
+            anyhow::bail!(
+                "{}: time: step {}, but {} has {} time step{}",
+                path.display(),
+                sc.last_time(),
+                opts.scene.display(),
+                scene.steps(),
+                if scene.steps() == 1 { "" } else { "s" }
+            );
+        }
+    }
     let until_converged = opts.frames == 0 && script.is_none();
     let frames = match (opts.frames, &script) {
         (0, Some(s)) => s.frames,
@@ -185,6 +197,7 @@ fn run_frames(opts: &RunOptions, transport: &mut dyn Transport) -> Result<RunSum
             pick: None,
             grow: None,
             layers: Vec::new(),
+            step: 0,
         };
         if let Some(sc) = &script {
             sent.script(sc, &scene, &display, &mut state, transport)?;
@@ -286,6 +299,7 @@ impl Sent {
         state.render.overlay.show = sc.overlay(frame, scene.render.overlay.show);
         state.render.accuracy = sc.accuracy(frame, scene.render.accuracy);
         state.render.step_factor = sc.step_factor(frame, scene.render.step_factor);
+        state.step = sc.time(frame);
         state.layers = sc.layers(frame);
         // Tools are sent when they change, not every frame.
         let now = sc.tools(frame, &scene.tools)?;

@@ -27,6 +27,9 @@
 //! ```
 //!
 //! `accuracy` and `step_factor` set the render knobs of the same names.
+//! `time` moves through a scene's `series`: the step drawn is the whole
+//! part of its interpolated value, so keys `{ frame = 0, time = 0 }` and
+//! `{ frame = 190, time = 19 }` play 20 steps at 10 frames a step.
 //!
 //! Numbers are interpolated linearly between the keys that set them and held
 //! after the last (a tool's normal is renormalised); a transfer function
@@ -34,6 +37,7 @@
 
 use anyhow::{bail, Context, Result};
 use parallax_common::camera::Placement;
+use parallax_common::config::MAX_SERIES;
 use parallax_common::tools::Tool;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -93,6 +97,10 @@ pub struct Key {
     /// `render.step_factor`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub step_factor: Option<f64>,
+    /// The time step of the scene's `series` (interpolated; its whole part
+    /// is drawn).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub transfer_function: Option<PathBuf>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -220,6 +228,7 @@ pub struct Script {
     gamma: Track<[f64; 1]>,
     accuracy: Track<[f64; 1]>,
     step_factor: Track<[f64; 1]>,
+    time: Track<[f64; 1]>,
     cursor: Track<[f64; 3]>,
     /// (first frame, on) of each overlay switch.
     overlay: Vec<(u64, bool)>,
@@ -266,6 +275,7 @@ impl Script {
             gamma: Track::default(),
             accuracy: Track::default(),
             step_factor: Track::default(),
+            time: Track::default(),
             cursor: Track::default(),
             overlay: Vec::new(),
             layers: Vec::new(),
@@ -351,6 +361,12 @@ impl Script {
                     bail!("{at}: step_factor must be > 0 (got {f})");
                 }
                 s.step_factor.keys.push((k.frame, [f]));
+            }
+            if let Some(t) = k.time {
+                if !(t.is_finite() && (0.0..=MAX_SERIES as f64).contains(&t)) {
+                    bail!("{at}: time must be a step from 0 to {MAX_SERIES} (got {t})");
+                }
+                s.time.keys.push((k.frame, [t]));
             }
             if let Some(ToolSet(set)) = &k.tools {
                 parallax_common::tools::check_tools(set, Path::new(&format!("{at}: tools")))?;
@@ -468,6 +484,22 @@ impl Script {
     /// none).
     pub fn step_factor(&self, frame: u64, scene: f64) -> f64 {
         self.step_factor.at(frame, [scene])[0]
+    }
+
+    /// The time step at `frame`: the whole part of the keys' interpolated
+    /// value (0 where the script sets none).
+    pub fn time(&self, frame: u64) -> u32 {
+        (self.time.at(frame, [0.0])[0] + 1e-9).floor() as u32
+    }
+
+    /// The last time step the script reaches (0 without `time` keys).
+    pub fn last_time(&self) -> u32 {
+        self.time
+            .keys
+            .iter()
+            .map(|(_, [t])| (t + 1e-9).floor() as u32)
+            .max()
+            .unwrap_or(0)
     }
 
     /// The tools at `frame`: the scene's (or the tool set in force),

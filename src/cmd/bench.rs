@@ -123,6 +123,26 @@ enum Study {
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
     },
+    /// Playing a time series: the volume moving 2 voxels a step along x,
+    /// each step its own database; each step change followed until the
+    /// cut has converged, with the next step read ahead and without
+    /// (DIR/series.csv).
+    Series {
+        /// A volume file.
+        #[arg(long, default_value = "/usr/share/mricron/templates/ch2.nii.gz")]
+        volume: PathBuf,
+        /// Transfer function file.
+        #[arg(long, default_value = "configs/tf/colin27-brain.toml")]
+        tf: PathBuf,
+        /// Time steps.
+        #[arg(long, default_value_t = 12)]
+        steps: usize,
+        /// Image size WxH.
+        #[arg(long, default_value = "512x384", value_parser = args::size::<u32>)]
+        size: [u32; 2],
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+    },
     /// What registered layers cost against the volume alone: one and two
     /// aligned layers (the volume again, the extinction shared so that the
     /// image stays the volume's), one on another grid placed by a
@@ -205,7 +225,25 @@ pub fn run(a: Args) -> Result<()> {
             rounds,
             out,
         } => layers(&volume, &tf, size, rounds, &out),
+        Study::Series {
+            volume,
+            tf,
+            steps,
+            size,
+            out,
+        } => series(&volume, &tf, steps, size, &out),
     }
+}
+
+fn series(volume: &Path, tf: &Path, steps: usize, size: [u32; 2], out: &Path) -> Result<()> {
+    anyhow::ensure!(steps >= 2, "--steps {steps}: a series has at least 2");
+    let (_, placement, view) = desktop_shot(volume, size, out, "series-0.pxo")?;
+    let vol = parallax_backend::volume::Volume::read_all(data::open(volume, None)?.as_mut())?;
+    let paths = parallax_bench::series::import_series(&vol, steps, out)?;
+    let tf = parallax_common::tf::TransferFunction::load(tf)?;
+    let p = parallax_bench::series::run(&paths, &tf, &placement, &view, out)?;
+    parallax_bench::series::print(&p);
+    wrote(out, "series.csv")
 }
 
 fn layers(volume: &Path, tf: &Path, size: [u32; 2], rounds: usize, out: &Path) -> Result<()> {

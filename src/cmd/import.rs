@@ -1,14 +1,14 @@
 //! `parallax import`: a volume into the out-of-core octree database.
 
 use super::args;
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use parallax_backend::data::{self, RawParams};
 use parallax_backend::store::codec::Codec;
 use parallax_backend::store::{self, BrickEncoding, ImportOptions};
-use parallax_backend::volume::VoxelType;
+use parallax_backend::volume::{VolumeSource, VoxelType};
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Import a volume into the out-of-core octree database (.pxo).
 #[derive(clap::Args)]
@@ -76,9 +76,13 @@ pub struct Args {
     /// OME-Zarr: the channel to import (0 by default)
     #[arg(long)]
     channel: Option<usize>,
-    /// OME-Zarr: the time point to import (0 by default)
+    /// OME-Zarr or 4-D NIfTI: the time point to import (0 by default)
     #[arg(long)]
     time: Option<usize>,
+    /// OME-Zarr or 4-D NIfTI: import every time point, each into
+    /// OUTPUT/tNNNN.pxo (OUTPUT a folder): a scene's `series`
+    #[arg(long, conflicts_with = "time")]
+    all_times: bool,
     /// NaN in float input: refuse (an error naming the voxel) or empty
     /// ("no data": never shown, never blended into its neighbours)
     #[arg(long, value_enum, default_value_t = NanPolicy::Refuse)]
@@ -101,6 +105,29 @@ enum NanPolicy {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    if !a.all_times {
+        return import_one(&a, a.time, &a.output);
+    }
+    let times = open(&a, None)?.time_points();
+    std::fs::create_dir_all(&a.output)
+        .with_context(|| format!("{}: cannot create the series' folder", a.output.display()))?;
+    let mut names = Vec::with_capacity(times);
+    for t in 0..times {
+        let name = format!("t{t:04}.pxo");
+        eprintln!("time point {t} of {times}:");
+        import_one(&a, Some(t), &a.output.join(&name))?;
+        names.push(format!("\"{}/{name}\"", a.output.display()));
+    }
+    println!(
+        "{times} time points in {}; a scene draws them with\nseries = [{}]",
+        a.output.display(),
+        names.join(", ")
+    );
+    Ok(())
+}
+
+/// The input, time point `time` chosen.
+fn open(a: &Args, time: Option<usize>) -> Result<Box<dyn VolumeSource + Send>> {
     let raw = match (a.dims, a.voxel_type) {
         (Some(d), Some(t)) => Some(RawParams {
             dims: d,
@@ -112,26 +139,38 @@ pub fn run(a: Args) -> Result<()> {
         (None, None) => None,
         _ => bail!("raw input needs both --dims and --type"),
     };
-    let mut src = data::open_with(
+    data::open_with(
         &a.input,
         &data::InputOptions {
             raw,
-            series: a.series,
+            series: a.series.clone(),
             spacing: a.spacing,
             nan_empty: a.nan == NanPolicy::Empty,
             zarr: data::zarr::ZarrSelect {
                 level: a.level,
                 channel: a.channel,
-                time: a.time,
+                time,
             },
         },
-    )?;
+    )
+}
+
+/// Imports time point `time` of the input into `output`.
+fn import_one(a: &Args, time: Option<usize>, output: &Path) -> Result<()> {
+    let mut src = open(a, time)?;
     if let Some(t) = a.labels_from_thresholds.clone() {
         src = Box::new(data::Thresholded::new(src, t)?);
     }
     let described = src.describe();
     if let Some(d) = &described {
         eprintln!("note: {d}");
+    }
+    let times = src.time_points();
+    if times > 1 && !a.all_times && a.input.to_string_lossy().to_lowercase().contains(".nii") {
+        eprintln!(
+            "note: time point {} of {times} (--time; --all-times imports every one)",
+            time.unwrap_or(0)
+        );
     }
     let opts = ImportOptions {
         brick: a.brick,
@@ -149,7 +188,7 @@ pub fn run(a: Args) -> Result<()> {
         Some(d) => format!("{name} ({d})"),
         None => name.clone(),
     };
-    let r = store::import(src.as_mut(), &a.output, &source, &opts)?;
+    let r = store::import(src.as_mut(), output, &source, &opts)?;
     if let Some(note) = src.conversion_note() {
         eprintln!("note: {note}");
     }
@@ -162,7 +201,7 @@ pub fn run(a: Args) -> Result<()> {
     println!(
         "imported {} → {}: {} nodes ({} stored, {} empty), {:.1} MB → {:.1} MB in {:.2} s ({:.0} MB/s of source)",
         name,
-        a.output.display(),
+        output.display(),
         r.nodes,
         r.stored,
         r.empty,

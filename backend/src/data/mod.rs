@@ -80,9 +80,19 @@ fn open_any(path: &Path, opts: &InputOptions) -> Result<Box<dyn VolumeSource + S
         if zarr::is_zarr(path) {
             return Ok(Box::new(zarr::open_zarr(path, &opts.zarr, opts.spacing)?));
         }
+        let lower = path.to_string_lossy().to_lowercase();
+        if lower.ends_with(".nii") || lower.ends_with(".nii.gz") {
+            if opts.zarr.level.is_some() || opts.zarr.channel.is_some() {
+                bail!(
+                    "{}: --level and --channel choose within an OME-Zarr image, and this is a NIfTI file",
+                    path.display()
+                );
+            }
+            return Ok(Box::new(nifti::open_nifti_at(path, opts.zarr.time)?));
+        }
         if opts.zarr != zarr::ZarrSelect::default() {
             bail!(
-                "{}: --level, --channel and --time choose within an OME-Zarr image, and this is not one",
+                "{}: --level, --channel and --time choose within an OME-Zarr image (--time also a 4-D NIfTI's time point), and this is neither",
                 path.display()
             );
         }

@@ -77,7 +77,9 @@ fn scaled_type(stored: VoxelType, slope: f64, inter: f64) -> VoxelType {
 
 /// Opens a NIfTI-1 single-file volume (`.nii`, or gzip-compressed `.nii.gz`).
 ///
-/// * Dimensions: `dim[0]` must be 3, or more with every extra axis of size 1.
+/// * Dimensions: `dim[0]` must be 3, or 4 with `dim[4]` time points (one
+///   is read: `time`, else the first), or more with every extra axis of
+///   size 1.
 /// * Datatypes: uint8 (2), int16 (4), float32 (16), uint16 (512).
 /// * Spacing: |pixdim[1..4]|; a pixdim of 0 (written by some tools for
 ///   "unknown") is read as 1, without a warning: the scene's `size` places
@@ -86,6 +88,11 @@ fn scaled_type(stored: VoxelType, slope: f64, inter: f64) -> VoxelType {
 /// * Scaling: if `scl_slope` ≠ 0 and (slope, inter) ≠ (1, 0), values are
 ///   `slope · stored + inter`; see [`scaled_type`] for the reported type.
 pub fn open_nifti(path: &Path) -> Result<RawSource> {
+    open_nifti_at(path, None)
+}
+
+/// [`open_nifti`] choosing time point `time` of a 4-D file.
+pub fn open_nifti_at(path: &Path, time: Option<usize>) -> Result<RawSource> {
     let label = path.display().to_string();
     let file = File::open(path).with_context(|| format!("{label}: cannot open"))?;
     let gz = path.to_string_lossy().to_lowercase().ends_with(".gz");
@@ -137,10 +144,21 @@ pub fn open_nifti(path: &Path) -> Result<RawSource> {
     }
     let ndim = h.dim[0] as usize;
     ensure!(
-        (3..=7).contains(&ndim) && h.dim[4..=ndim].iter().all(|&d| d == 1),
-        "{label}: dim: dim[0] = {} with sizes {:?} is not a 3-D volume",
+        (3..=7).contains(&ndim) && h.dim[5.min(ndim + 1)..=ndim].iter().all(|&d| d == 1),
+        "{label}: dim: dim[0] = {} with sizes {:?} is not a 3-D volume or a time series of them",
         h.dim[0],
         &h.dim[1..=ndim.clamp(1, 7)]
+    );
+    let times = if ndim >= 4 {
+        h.dim[4].max(1) as usize
+    } else {
+        1
+    };
+    let t = time.unwrap_or(0);
+    ensure!(
+        t < times,
+        "{label}: --time {t}: dim[4] holds {times} time point(s), 0 to {}",
+        times - 1
     );
     let dims = [h.dim[1] as usize, h.dim[2] as usize, h.dim[3] as usize];
 
@@ -174,22 +192,30 @@ pub fn open_nifti(path: &Path) -> Result<RawSource> {
     // Some writers leave vox_offset at 0; the data then follows the header
     // and its 4-byte extension flag.
     let vox_offset = (vox_offset as u64).max(MIN_VOX_OFFSET);
+    // Time point t's volume follows the t before it.
+    let before = (t as u64)
+        .checked_mul(info.voxel_count())
+        .and_then(|n| n.checked_mul(stored.bytes() as u64))
+        .and_then(|n| n.checked_add(vox_offset))
+        .with_context(|| format!("{label}: dim: time point {t} lies beyond any file"))?;
     if !gz {
         check_file_size(
             &format!("{label}: dim, datatype, vox_offset"),
             &info,
-            vox_offset,
+            before,
             file_len,
             false,
         )?;
     }
-    skip_bytes(&mut reader, vox_offset - HEADER_BYTES as u64).with_context(|| {
-        format!("{label}: vox_offset: cannot reach the data at byte {vox_offset}")
+    skip_bytes(&mut reader, before - HEADER_BYTES as u64).with_context(|| {
+        format!("{label}: vox_offset, dim[4]: cannot reach time point {t}'s data at byte {before}")
     })?;
 
     let big_endian = h.endianness == Endianness::Big;
     let world = world(&h, spacing);
-    let mut src = RawSource::from_reader(label, info, big_endian, gz, reader).with_world(world);
+    let mut src = RawSource::from_reader(label, info, big_endian, gz, reader)
+        .with_world(world)
+        .with_time_points(times);
     let (slope, inter) = (h.scl_slope as f64, h.scl_inter as f64);
     if slope.is_finite() && inter.is_finite() && slope != 0.0 && !(slope == 1.0 && inter == 0.0) {
         src = src.with_scale(slope, inter, scaled_type(stored, slope, inter));

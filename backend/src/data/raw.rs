@@ -46,6 +46,8 @@ pub struct RawSource {
     nan_empty: bool,
     /// The scanner geometry the header gave (`VolumeSource::world`).
     world: Option<[[f64; 4]; 3]>,
+    /// The time points of the file (a 4-D NIfTI), of which this reads one.
+    time_points: usize,
 }
 
 impl RawSource {
@@ -75,12 +77,19 @@ impl RawSource {
             values_read: 0,
             nan_empty: false,
             world: None,
+            time_points: 1,
         }
     }
 
     /// The volume's place in the scanner's patient space (LPS mm).
     pub fn with_world(mut self, world: Option<[[f64; 4]; 3]>) -> Self {
         self.world = world;
+        self
+    }
+
+    /// The file holds `n` time points (`VolumeSource::time_points`).
+    pub fn with_time_points(mut self, n: usize) -> Self {
+        self.time_points = n;
         self
     }
 
@@ -202,6 +211,10 @@ impl VolumeSource for RawSource {
 
     fn world(&self) -> Option<[[f64; 4]; 3]> {
         self.world
+    }
+
+    fn time_points(&self) -> usize {
+        self.time_points
     }
 
     fn conversion_note(&self) -> Option<String> {

@@ -82,6 +82,8 @@ pub struct ZarrSource {
     levels: usize,
     /// The spacing the metadata gives this level (before `--spacing`).
     meta_spacing: [f64; 3],
+    /// The length of the image's time axis (1 without one).
+    time_points: usize,
     array_label: String,
     info: VolumeInfo,
     array: Array<FilesystemStore>,
@@ -369,11 +371,13 @@ pub fn open_zarr(path: &Path, sel: &ZarrSelect, spacing: Option<[f64; 3]>) -> Re
     let mut fixed = Vec::with_capacity(n - 3);
     let mut chosen_text = Vec::new();
     let (mut used_channel, mut used_time) = (false, false);
+    let mut time_points = 1;
     for i in 0..n - 3 {
         let a = &axes[i];
         let is_time = a.kind.as_deref() == Some("time") || a.name == "t";
         let (flag, pick) = if is_time {
             used_time = true;
+            time_points = shape[i] as usize;
             ("--time", sel.time)
         } else {
             used_channel = true;
@@ -465,6 +469,7 @@ pub fn open_zarr(path: &Path, sel: &ZarrSelect, spacing: Option<[f64; 3]>) -> Re
         sel: sel.clone(),
         levels: chosen.levels,
         meta_spacing,
+        time_points,
         array_label,
         info,
         array,
@@ -697,6 +702,10 @@ impl VolumeSource for ZarrSource {
 
     fn describe(&self) -> Option<String> {
         Some(self.note.clone())
+    }
+
+    fn time_points(&self) -> usize {
+        self.time_points
     }
 
     fn pyramid(&self) -> Result<Vec<FileLevel>> {

@@ -497,6 +497,48 @@ impl Loader {
         }
     }
 
+    /// Reads the root's brick now, waiting for it: a loader on a new
+    /// database (a series' next step) then draws the root's level from its
+    /// first frame rather than nothing. A failed read is reported as any
+    /// other (`errors`).
+    pub fn load_root(&mut self) {
+        let root = NodeKey::root();
+        if self.l2.contains(root) || self.failed.contains(&root) {
+            return;
+        }
+        let result = io::read_node(&self.sources, root).map_err(|e| format!("{e:#}"));
+        self.land(Landed { key: root, result });
+    }
+
+    /// Reads ahead, for a series' next step: posts reads of `keys` (most
+    /// wanted first) that are stored and not in the CPU cache, as far as
+    /// the cache has room, in place of the reads an earlier call posted that
+    /// no thread has started; the cached ones are touched. Nothing goes to
+    /// the GPU. Returns the reads posted.
+    pub fn prefetch(&mut self, keys: &[NodeKey]) -> usize {
+        self.drain();
+        let groups: Vec<Group> = keys
+            .iter()
+            .filter(|&&k| self.db.node(k).is_some_and(|r| r.is_stored()))
+            .map(|&k| match self.l2.contains(k) {
+                true => Group {
+                    cached: vec![k],
+                    missing: vec![],
+                },
+                false => Group {
+                    cached: vec![],
+                    missing: vec![k],
+                },
+            })
+            .collect();
+        self.post(&groups).len()
+    }
+
+    /// Whether a brick is in the CPU cache.
+    pub fn has_brick(&self, key: NodeKey) -> bool {
+        self.l2.contains(key)
+    }
+
     /// A decoded brick from the CPU cache.
     pub fn brick_data(&self, key: NodeKey) -> Option<Arc<Brick>> {
         self.l2.peek(key).cloned()

@@ -109,6 +109,34 @@ struct Live {
     quit: bool,
 }
 
+/// Playback of a series: while playing, the step advances when its tick is
+/// due (`next_tick`, set one period ahead when playback starts), wrapping
+/// after the last, as a new version every page sees; returns the next tick
+/// (none when not playing). A loop that falls more than a period behind
+/// starts counting again from now rather than skipping steps.
+fn play(shared: &Shared, live: &mut Live, next_tick: Option<Instant>) -> Option<Instant> {
+    let t = live.state.time;
+    if !t.playing {
+        return None;
+    }
+    let period = Duration::from_secs_f64(1.0 / t.rate);
+    let now = Instant::now();
+    let due = next_tick.unwrap_or(now + period);
+    if now < due {
+        return Some(due);
+    }
+    live.state.time.step = (t.step + 1) % live.state.steps.max(1);
+    live.version += 1;
+    shared
+        .state_tx
+        .send_replace(Arc::new(Shared::state_message(live)));
+    Some(if now >= due + period {
+        now + period
+    } else {
+        due + period
+    })
+}
+
 impl Shared {
     /// An error message to every client.
     fn notice(&self, message: &str) {
@@ -402,15 +430,27 @@ fn frame_loop(
     let mut page_recordings = 0u32;
     // Recordings whose script and movie are being written.
     let mut finishing = Vec::new();
+    // While the page plays a series, when the next step is due.
+    let mut next_tick: Option<Instant> = None;
     for frame in 0u64.. {
         let (state, version, pick, grow) = {
             let mut live = shared.live.lock().unwrap();
-            while !live.quit
-                && live.version == rendered_version
-                && live.pick.is_none()
-                && (converged || since_change >= SETTLE_FRAMES)
-            {
-                live = shared.wake.wait(live).unwrap();
+            loop {
+                next_tick = play(shared, &mut live, next_tick);
+                if live.quit
+                    || live.version != rendered_version
+                    || live.pick.is_some()
+                    || !(converged || since_change >= SETTLE_FRAMES)
+                {
+                    break;
+                }
+                live = match next_tick {
+                    Some(t) => {
+                        let wait = t.saturating_duration_since(Instant::now());
+                        shared.wake.wait_timeout(live, wait).unwrap().0
+                    }
+                    None => shared.wake.wait(live).unwrap(),
+                };
             }
             if live.quit {
                 break;
@@ -488,6 +528,7 @@ fn frame_loop(
             pick,
             grow: grow.map(|(_, tolerance)| tolerance),
             layers: state.layers.clone(),
+            step: state.time.step,
         };
         let start = Instant::now();
         transport.broadcast(&ToBackend::Frame(fs.clone()))?;

@@ -274,6 +274,7 @@ fn key_of(r: &Recorded, tf_file: Option<PathBuf>, layer_functions: Vec<LayerFunc
         gamma: Some(s.render.gamma),
         accuracy: Some(s.render.accuracy),
         step_factor: Some(s.render.step_factor),
+        time: Some(s.step as f64),
         transfer_function: tf_file,
         // The whole tool set: a page may have added or removed tools.
         tool: Vec::new(),

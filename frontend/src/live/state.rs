@@ -43,6 +43,38 @@ pub struct LiveState {
     /// Their transfer functions (the scene's files, then as edited).
     #[serde(default)]
     pub layer_tfs: Vec<TransferFunction>,
+    /// The scene's time steps (its `series`' length, 1 without one): the
+    /// page's slider runs over them. Not a client's to set.
+    #[serde(default = "one_step")]
+    pub steps: u32,
+    /// The time step drawn, and the playback.
+    #[serde(default)]
+    pub time: TimeControl,
+}
+
+fn one_step() -> u32 {
+    1
+}
+
+/// A series' playback (`time` messages): the step drawn, whether it
+/// advances by itself, and at how many steps a second (wrapping to the
+/// first after the last).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeControl {
+    pub step: u32,
+    pub playing: bool,
+    pub rate: f64,
+}
+
+impl Default for TimeControl {
+    fn default() -> Self {
+        TimeControl {
+            step: 0,
+            playing: false,
+            rate: 2.0,
+        }
+    }
 }
 
 /// A transfer function point as the page sends it.
@@ -102,6 +134,13 @@ pub enum ClientMsg {
         index: usize,
         visible: Option<bool>,
         opacity: Option<f64>,
+    },
+    /// Moves through the scene's time series: the step drawn, playback on
+    /// or off, its rate in steps a second.
+    Time {
+        step: Option<u32>,
+        playing: Option<bool>,
+        rate: Option<f64>,
     },
     /// Replaces registered layer `index`'s transfer function.
     LayerTf {
@@ -251,6 +290,8 @@ impl LiveState {
             cursor: scene.render.overlay.cursor,
             layers: scene.layers.iter().map(LayerControl::from).collect(),
             layer_tfs,
+            steps: scene.steps() as u32,
+            time: TimeControl::default(),
         }
     }
 
@@ -316,6 +357,31 @@ impl LiveState {
                 }
                 if let Some(v) = gamma {
                     self.gamma = within("set.gamma", v, 0.0, 1.0)?;
+                }
+            }
+            ClientMsg::Time {
+                step,
+                playing,
+                rate,
+            } => {
+                if let Some(s) = step {
+                    ensure!(
+                        s < self.steps,
+                        "time.step {s}: the scene has {} time step(s), 0 to {}",
+                        self.steps,
+                        self.steps - 1
+                    );
+                    self.time.step = s;
+                }
+                if let Some(r) = rate {
+                    self.time.rate = within("time.rate", r, 0.01, 240.0)?;
+                }
+                if let Some(p) = playing {
+                    ensure!(
+                        !p || self.steps > 1,
+                        "time.playing: the scene has one time step (no series)"
+                    );
+                    self.time.playing = p;
                 }
             }
             ClientMsg::Tf { point } => self.tf = transfer_function("tf", point)?,
@@ -470,6 +536,14 @@ impl LiveState {
             display,
         )?;
         next.apply(ClientMsg::Cursor { point: s.cursor }, display)?;
+        next.apply(
+            ClientMsg::Time {
+                step: Some(s.time.step),
+                playing: Some(s.time.playing),
+                rate: Some(s.time.rate),
+            },
+            display,
+        )?;
         let n = s.tf.points().len();
         ensure!(
             (2..=MAX_TF_POINTS).contains(&n),
