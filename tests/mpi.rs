@@ -911,6 +911,16 @@ fn a_time_series_plays_identically_in_the_cluster() {
         (xs[0] < xs[1] && xs[1] < xs[2]) || (xs[0] > xs[1] && xs[1] > xs[2]),
         "{xs:?}"
     );
+    // `parallax info` names the series and, with --verify, checks every
+    // step.
+    let o = run(&["info", s(&scene), "--verify"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("series:        20 time steps"),
+        "{}",
+        text(&o)
+    );
+    assert!(text(&o).contains("series[19]:     ok"), "{}", text(&o));
     // A step past the series is refused naming the script.
     let bad = w.path("bad.toml");
     std::fs::write(&bad, "[[key]]\nframe = 0\ntime = 20\n").unwrap();

@@ -1,5 +1,6 @@
 //! `parallax info`: what a database holds; `--verify` checks every brick.
-//! Given a scene file, its volume and each of its registered layers.
+//! Given a scene file, its volume (a series' first step, the others
+//! verified with `--verify`) and each of its registered layers.
 
 use anyhow::{Context, Result};
 use parallax_backend::store::{info, OctreeDb};
@@ -19,6 +20,24 @@ pub fn run(a: Args) -> Result<()> {
     if a.database.extension().is_some_and(|e| e == "toml") {
         let scene = parallax_common::config::Scene::load(&a.database)?;
         println!("scene:         {}", a.database.display());
+        if let (Some(first), Some(last)) = (scene.series.first(), scene.series.last()) {
+            println!(
+                "series:        {} time steps, {} … {} (the first described; with --verify every one checked)",
+                scene.series.len(),
+                first.display(),
+                last.display()
+            );
+            if a.verify {
+                for (i, p) in scene.series.iter().enumerate().skip(1) {
+                    let db = OctreeDb::open(p).with_context(|| format!("series[{i}]"))?;
+                    let r = info::verify(&db).with_context(|| format!("series[{i}]"))?;
+                    println!(
+                        "series[{i}]:     ok, {} bricks decoded and checked",
+                        r.bricks
+                    );
+                }
+            }
+        }
         describe(&scene.volume, a.verify)?;
         for (i, l) in scene.layers.iter().enumerate() {
             println!();
