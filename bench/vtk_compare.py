@@ -233,7 +233,7 @@ def vtk_time_main(a):
     case_name, step = a.vtk_time[0], float(a.vtk_time[1])
     case = next(c for c in CASES if c["name"] == case_name)
     out = Path(a.out)
-    volume = vtk_read_volume() if case["volume"] == "colin27" else read_nrrd(out / "ct256.nrrd")
+    volume = read_case_volume(case, out)
     base = tomllib.loads((BENCH / "vtk_scene.toml").read_text())
     tf = load_tf((BENCH / case["tf"]).resolve())
     pl = base["placement"]
@@ -337,7 +337,27 @@ CASES = [
          tf="../configs/tf/colin27-skin.toml", full=False, preint="analytic"),
     dict(name="ct-bone", title="CT phantom 256³ (i16 Hounsfield units), CT-Bone", volume="ct",
          tf="../configs/tf/ct-bone.toml", full=False, preint="2d"),
+    # Issue 40's case: a clinical chest CT's geometry (512 × 512 × 48 i16,
+    # 1 × 1 × 10.7 mm voxels, mostly air, a scanner's noise), imported with
+    # the defaults, under 3D Slicer's CT-Soft-Tissue preset, and Parallax
+    # at its default pre-integration with only step_factor and accuracy
+    # varied (`defaults_only`).
+    dict(name="ct-thick", title="thick-slice CT 512×512×48 (i16, 1×1×10.7 mm), CT-Soft-Tissue",
+         volume="ct-thick", tf="../configs/tf/ct-soft-tissue.toml", full=False, preint=None,
+         defaults_only=True),
 ]
+
+# The NRRD each non-Colin27 volume is read from, and the stem of its
+# databases (bench/vtk_compare.sh writes and imports them).
+VOLUME_FILES = {"ct": "ct256", "ct-thick": "ct-thick"}
+# The defaults-only ladders: accuracy (pixels per voxel) against step_factor.
+DEFAULT_ACCURACIES = [1.0, 2.0, 4.0]
+
+
+def read_case_volume(case, out):
+    if case["volume"] == "colin27":
+        return vtk_read_volume()
+    return read_nrrd(out / f"{VOLUME_FILES[case['volume']]}.nrrd")
 
 
 def main():
@@ -377,8 +397,7 @@ def main():
         if case["name"] not in a.cases.split(","):
             continue
         if case["volume"] not in volumes:
-            volumes[case["volume"]] = (vtk_read_volume() if case["volume"] == "colin27"
-                                       else read_nrrd(out / "ct256.nrrd"))
+            volumes[case["volume"]] = read_case_volume(case, out)
         log("")
         log(f"==== {case['title']} ({case['name']})")
         case_rows, case_pairs = run_case(case, a, px, out, volumes[case["volume"]])
@@ -483,10 +502,11 @@ def case_scene(case):
 
 def run_case(case, a, px, out, volume):
     name = case["name"]
-    stem = "colin27" if case["volume"] == "colin27" else "ct256"
-    dbs = {"full": (out / f"{stem}-full.pxo").resolve(), "8-bit": (out / f"{stem}-8bit.pxo").resolve(),
-           "full-b64": (out / f"{stem}-full-b64.pxo").resolve(),
-           "8-bit-b64": (out / f"{stem}-8bit-b64.pxo").resolve()}
+    stem = "colin27" if case["volume"] == "colin27" else VOLUME_FILES[case["volume"]]
+    files = {"full": f"{stem}-full.pxo", "8-bit": f"{stem}-8bit.pxo",
+             "full-b64": f"{stem}-full-b64.pxo", "8-bit-b64": f"{stem}-8bit-b64.pxo"}
+    kinds = ["full", "8-bit"] if case.get("defaults_only") else list(files)
+    dbs = {k: (out / files[k]).resolve() for k in kinds}
     for k, p in dbs.items():
         if not p.exists():
             sys.exit(f"{p} missing: run bench/vtk_compare.sh (it imports the databases)")
@@ -495,7 +515,7 @@ def run_case(case, a, px, out, volume):
     tf = load_tf((BENCH / base["transfer_function"]).resolve())
     pl = base["placement"]
     dims, spacing = volume[1], volume[2]
-    if case["volume"] == "ct":
+    if case["volume"] != "colin27":
         log(f"air (below -900 HU): {(volume[3] < -900).mean() * 100:.0f}% of the voxels")
     extent = tuple(d * s for d, s in zip(dims, spacing))     # N·s: (181, 217, 181) mm
     placement = Placement(pl["center"], pl["size"], pl["rotation_deg"], extent)
@@ -535,19 +555,27 @@ def run_case(case, a, px, out, volume):
     # half the leaves and a shorter descent per ray; docs/performance.md,
     # "Against VTK's CPU ray caster").
     preint = case["preint"]
-    label = PREINT_LABELS[preint]
     ladders = {}
-    for kind in ["8-bit", "full"]:
-        ladders[f"{kind} bricks, {label}"] = Ladder(kind, TABLE_STEPS)
-        ladders[f"{kind} bricks of 64, {label}"] = Ladder(f"{kind}-b64", BIG_BRICK_STEPS)
-    ladders[f"full bricks of 64, {label}, level 1"] = Ladder(
-        "full-b64", COARSE_STEPS, COARSE_VOXEL_MM, dict(accuracy=COARSE_ACCURACY), "-level1")
+    if case.get("defaults_only"):
+        # The default import (8-bit bricks of 32) and pre-integration;
+        # only accuracy and step_factor move. Rays cross the slices along
+        # y here, so a step of 1 mm is step_factor 1.
+        for acc in DEFAULT_ACCURACIES:
+            ladders[f"defaults, accuracy {acc:g}"] = Ladder(
+                "8-bit", TABLE_STEPS, 1.0, dict(accuracy=acc) if acc != 1.0 else None, f"-acc{acc:g}")
+    else:
+        label = PREINT_LABELS[preint]
+        for kind in ["8-bit", "full"]:
+            ladders[f"{kind} bricks, {label}"] = Ladder(kind, TABLE_STEPS)
+            ladders[f"{kind} bricks of 64, {label}"] = Ladder(f"{kind}-b64", BIG_BRICK_STEPS)
+        ladders[f"full bricks of 64, {label}, level 1"] = Ladder(
+            "full-b64", COARSE_STEPS, COARSE_VOXEL_MM, dict(accuracy=COARSE_ACCURACY), "-level1")
 
     def table_run(label, s):
         ld = ladders[label]
-        run = f"{name}-ours-{ld.db}-{preint}{ld.tag}-step{s}-etvtk"
+        run = f"{name}-ours-{ld.db}-{preint or 'default'}{ld.tag}-step{s}-etvtk"
         render = dict(step_factor=round(s / ld.voxel_mm, 4), early_termination=VTK_EARLY_TERMINATION,
-                      preintegration=preint, **(ld.render or {}))
+                      **(dict(preintegration=preint) if preint else {}), **(ld.render or {}))
         img, st = run_parallax(px, run, base, dbs[ld.db], render, out, a.frames, a.reuse)
         rmse, mx, psnr = image_error(img, ref)
         row = parallax_row(name, label, s, VTK_EARLY_TERMINATION, st, rmse, mx, psnr,

@@ -30,6 +30,11 @@ $px import "$out/ct256.nrrd" -o "$out/ct256-full.pxo" --quantize none
 $px import "$out/ct256.nrrd" -o "$out/ct256-8bit.pxo" --quantize u8
 $px import "$out/ct256.nrrd" -o "$out/ct256-full-b64.pxo" --quantize none --brick 64
 $px import "$out/ct256.nrrd" -o "$out/ct256-8bit-b64.pxo" --quantize u8 --brick 64
+# Issue 40's thick-slice CT: 512 × 512 × 48 voxels of 1 × 1 × 10.7 mm, the
+# defaults (8-bit bricks of 32), and full bricks for the reference.
+[ -f "$out/ct-thick.nrrd" ] || $px synth ct --size 512 --slices 48 --type i16 -o "$out/ct-thick.nrrd"
+$px import "$out/ct-thick.nrrd" -o "$out/ct-thick-8bit.pxo"
+$px import "$out/ct-thick.nrrd" -o "$out/ct-thick-full.pxo" --quantize none
 
 # VTK renders off screen through EGL (or OSMesa) on recent PyPI wheels; fall
 # back to a virtual X display only if that fails.

@@ -481,6 +481,23 @@ fn the_files_pyramid_becomes_the_octrees_coarser_levels_and_its_difference_is_re
         }
     }
 
+    // A coarser level that cannot be read does not stop the import: it is
+    // named, and the octree's levels are averaged.
+    let o = Command::new(env!("CARGO_BIN_EXE_parallax"))
+        .arg("import")
+        .arg(inputs().join("pyramid-broken.ome.zarr"))
+        .args(["--quantize", "none", "--brick", "8", "-o"])
+        .arg(inputs().join("pyramid-broken.pxo"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("coarser resolution levels cannot be read") && err.contains("s2"),
+        "{err}"
+    );
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("from the file's resolution level"));
+
     // --recompute-levels: level 2 is the average of the source again.
     let (db, stdout, _) = import_pyramid(&["--recompute-levels"]);
     assert!(

@@ -130,6 +130,11 @@ ome(
 )
 
 # Damaged copies.
+# A pyramid whose coarsest level lost its array metadata.
+broken = os.path.join(out, "pyramid-broken.ome.zarr")
+shutil.copytree(os.path.join(out, "pyramid.ome.zarr"), broken)
+os.remove(os.path.join(broken, "s2", "zarr.json"))
+
 src = os.path.join(out, "v3-zstd.ome.zarr")
 chunk = os.path.join("s0", "c", "0", "1", "1", "0")
 

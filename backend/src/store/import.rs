@@ -119,7 +119,7 @@ impl FileFeed {
         let mut slice = vec![0f32; averaged.len()];
         self.src.read_slices(&mut slice).with_context(|| {
             format!(
-                "{source_name}: resolution level {}: reading slice {z}",
+                "{source_name}: resolution level {}: reading slice {z} (--recompute-levels averages the levels instead of reading them)",
                 self.file_level
             )
         })?;
@@ -157,12 +157,21 @@ fn plan_pyramid(
     src: &dyn VolumeSource,
     layout: &OctreeLayout,
     spacing: [f64; 3],
-    source_name: &str,
-) -> Result<(Vec<Option<FileFeed>>, Vec<String>)> {
+) -> (Vec<Option<FileFeed>>, Vec<String>) {
     let leaf = layout.leaf_level();
     let mut feeds: Vec<Option<FileFeed>> = (0..layout.levels).map(|_| None).collect();
     let mut unused = Vec::new();
-    for fl in src.pyramid()? {
+    let levels = match src.pyramid() {
+        Ok(l) => l,
+        Err(e) => {
+            // The level chosen reads; its coarser ones are averaged.
+            unused.push(format!(
+                "the file's coarser resolution levels cannot be read ({e:#}): they are averaged from the finer ones"
+            ));
+            Vec::new()
+        }
+    };
+    for fl in levels {
         let matching = (0..leaf).find(|&l| {
             let scale = layout.voxel_scale(l);
             layout.level_dims(l) == fl.dims
@@ -172,18 +181,21 @@ fn plan_pyramid(
                 })
         });
         match matching {
-            Some(l) if feeds[l as usize].is_none() => {
-                let src = src.open_level(fl.index).with_context(|| {
-                    format!("{source_name}: resolution level {}", fl.index)
-                })?;
-                feeds[l as usize] = Some(FileFeed {
-                    file_level: fl.index,
-                    src,
-                    sum_sq: 0.0,
-                    max: 0.0,
-                    voxels: 0,
-                });
-            }
+            Some(l) if feeds[l as usize].is_none() => match src.open_level(fl.index) {
+                Ok(src) => {
+                    feeds[l as usize] = Some(FileFeed {
+                        file_level: fl.index,
+                        src,
+                        sum_sq: 0.0,
+                        max: 0.0,
+                        voxels: 0,
+                    })
+                }
+                Err(e) => unused.push(format!(
+                    "resolution level {} cannot be opened ({e:#}): its octree level is averaged from the finer one",
+                    fl.index
+                )),
+            },
             _ => unused.push(format!(
                 "resolution level {} ({}×{}×{} voxels of {}×{}×{}) is none of the octree's levels: they are averaged from the finer ones",
                 fl.index,
@@ -196,7 +208,7 @@ fn plan_pyramid(
             )),
         }
     }
-    Ok((feeds, unused))
+    (feeds, unused)
 }
 
 /// Bricks encoded together in one parallel batch (bounds the memory of
@@ -231,7 +243,7 @@ pub fn import(
         OctreeLayout::for_spacing(info.dims, opts.brick, info.spacing)
     };
     let (feeds, pyramid_unused) = if opts.pyramid && !opts.labels {
-        plan_pyramid(&*src, &layout, info.spacing, source_name)?
+        plan_pyramid(&*src, &layout, info.spacing)
     } else {
         ((0..layout.levels).map(|_| None).collect(), Vec::new())
     };
