@@ -2,10 +2,12 @@
 """Parallax's GPU ray caster (on whatever adapter wgpu picks: lavapipe on the
 2-core reference machine) against VTK's CPU ray caster
 vtkFixedPointVolumeRayCastMapper, on the same 512×512 view, at matched step
-lengths, both measured against one reference image. Three comparisons in one
+lengths, both measured against one reference image. Four comparisons in one
 run (CASES): the Colin27 MRI with a translucent brain (the full study), the
-same head as opaque skin, and a 256³ CT phantom in Hounsfield units that is
-mostly air, under 3D Slicer's CT-Bone preset.
+same head as opaque skin, a 256³ CT phantom in Hounsfield units that is
+mostly air, under 3D Slicer's CT-Bone preset, and a thick-slice CT (512 ×
+512 × 48, 10.7 mm slices) under CT-Soft-Tissue, where Parallax keeps every
+default but accuracy and step_factor (issue 40).
 
 What a pixel means (docs/design.md): with shading off, the premultiplied
 emission–absorption integral C = ∫ τ c exp(−∫τ) dt, A = 1 − exp(−∫τ dt) along
