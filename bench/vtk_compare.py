@@ -15,9 +15,9 @@ the pixel's ray inside the box [0, N·s]. Every image here is compared with the
 reference as float premultiplied RGBA (RMSE over all channels and pixels, max
 abs, PSNR with peak 1), as `parallax bench sweep` does.
 
-The reference is Parallax itself at a very small step (render.step_factor =
-0.0625, i.e. 1/16 mm, interpolation = "exact", full-precision bricks,
-accuracy = 0.01, early_termination = 1, no visibility culling). `parallax
+The reference is Parallax itself at a very small step (1/16 mm: render.step_factor =
+0.25 at accuracy = 0.01, whose sub-pixel step is a quarter of it; interpolation =
+"exact", full-precision bricks, early_termination = 1, no visibility culling). `parallax
 bench sweep` measures that configuration at RMSE ≈ 3e-5 from the exact integral on
 this dataset (out/bench/bench.csv), far below every error compared here.
 
@@ -353,7 +353,14 @@ CASES = [
 # databases (bench/vtk_compare.sh writes and imports them).
 VOLUME_FILES = {"ct": "ct256", "ct-thick": "ct-thick"}
 # The defaults-only ladders: accuracy (pixels per voxel) against step_factor.
-DEFAULT_ACCURACIES = [1.0, 2.0, 4.0]
+# Below 1, accuracy also shrinks the finest level's step (sub-pixel
+# accuracy); above, it coarsens the cut (on this view 300 / 98 / 44 / 20 / 8
+# bricks at 1 / 2 / 4 / 8 / 16).
+DEFAULT_ACCURACIES = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0]
+# Their step_factors (the "step_mm" column: rays cross the slices along y,
+# so at the finest level step_factor 1 is 1 mm; a coarser level's voxel
+# is larger by its level's factor).
+DEFAULT_STEPS = [0.25, 0.35, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]
 
 
 def read_case_volume(case, out):
@@ -525,7 +532,9 @@ def run_case(case, a, px, out, volume):
 
     # ---- Parallax: the reference, then the timed configurations.
     log("Parallax renders (lavapipe unless PARALLAX_ADAPTER says otherwise):")
-    ref_render = dict(step_factor=0.0625, interpolation="exact", accuracy=0.01,
+    # Accuracy 0.01 draws the finest level everywhere at a quarter of the
+    # step (sub-pixel accuracy): 1/16 of a voxel.
+    ref_render = dict(step_factor=0.25, interpolation="exact", accuracy=0.01,
                       early_termination=1.0, visibility_feedback=False,
                       cpu_cache_mb=2048, gpu_cache_mb=1024, upload_budget=100000)
     ref, ref_stats = run_parallax(px, f"{name}-reference", base, dbs["full"], ref_render, out,
@@ -564,7 +573,7 @@ def run_case(case, a, px, out, volume):
         # y here, so a step of 1 mm is step_factor 1.
         for acc in DEFAULT_ACCURACIES:
             ladders[f"defaults, accuracy {acc:g}"] = Ladder(
-                "8-bit", TABLE_STEPS, 1.0, dict(accuracy=acc) if acc != 1.0 else None, f"-acc{acc:g}")
+                "8-bit", DEFAULT_STEPS, 1.0, dict(accuracy=acc) if acc != 1.0 else None, f"-acc{acc:g}")
     else:
         label = PREINT_LABELS[preint]
         for kind in ["8-bit", "full"]:

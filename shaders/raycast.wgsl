@@ -335,12 +335,20 @@ fn voxel_along(e: vec3<f32>, d: vec3<f32>) -> f32 {
 // at the leaf's entry so that the samples of a leaf stay evenly spaced
 // (step_factor 0.5 is λ itself). The prediction buffer's sparse traversal
 // steps by the voxel size / κ, κ from the brick's variance (B10 §4.5).
+// Sub-pixel accuracy a < 1 (issue 40, `frame.extent.w`): a leaf of the
+// finest level whose voxel covers p > a pixels cannot be refined, so its
+// step shrinks by a / min(p, 1), to a quarter at most; p is the voxel's
+// smallest edge over the pixel's cone 2·t·sin(θ/2) at the leaf's entry.
+// Continuous in a, and off (bit for bit the voxel step) from a = 1 up.
 fn leaf_step(leaf: Leaf, d: vec3<f32>, t_eye: f32, sin_half: f32, sparse: bool) -> f32 {
     let step_factor = frame.render.x;
     let voxel = voxel_along(leaf.voxel, d);
     var h = step_factor * voxel;
     if (frame.render.w > 0.5) {
         h = max(2.0 * step_factor * t_eye * sin_half, voxel / 64.0);
+    } else if (!ISO && frame.extent.w > 0.0 && leaf.level == frame.counts.y) {
+        let p = frame.spacing.w / max(2.0 * t_eye * sin_half, 1e-30);
+        h = h * clamp(frame.extent.w / min(p, 1.0), 0.25, 1.0);
     }
     if (ISO && sparse) {
         h = max(h, voxel / mix(frame.predict.z, frame.predict.w, slot_range(leaf.slot).z));

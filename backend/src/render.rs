@@ -881,6 +881,11 @@ impl Renderer {
             tile_culling: self.tile_culling,
             lookahead: self.lookahead,
             adaptive_step: cfg.adaptive_step,
+            sub_pixel: if cfg.accuracy < 1.0 {
+                cfg.accuracy as f32
+            } else {
+                0.0
+            },
             multilevel: cfg.multilevel.then(|| Multilevel {
                 accuracy: cfg.accuracy as f32,
                 lightfield: self.loader.lightfield().map(|lf| {

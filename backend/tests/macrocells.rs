@@ -183,6 +183,21 @@ fn a_ct_with_much_air_unchanged_with_fewer_samples() {
     }
 }
 
+/// The 48³ Marschner–Lobb volume in float bricks of 16 under a translucent
+/// function: (volume, database, function).
+fn marschner_lobb_48(
+    dir: &Path,
+) -> (
+    parallax_backend::volume::Volume,
+    std::path::PathBuf,
+    TransferFunction,
+) {
+    let vol = support::marschner_lobb(48);
+    let db = dir.join("ml.pxo");
+    support::import_volume(&vol, &db, 16, BrickEncoding::F32);
+    (vol, db, support::translucent())
+}
+
 /// L12 §4.4's adaptive step (Eq. 3, λ = t·sin(θ/2) at step_factor 0.5):
 /// moved twice as far from the eye, a volume gets about half the samples
 /// per ray it covers (the voxel step: as many); its error against the exact
@@ -191,15 +206,14 @@ fn a_ct_with_much_air_unchanged_with_fewer_samples() {
 fn the_adaptive_step_follows_the_distance_from_the_eye() {
     use parallax_backend::reference::{self, Tolerance};
     let dir = tempfile::tempdir().unwrap();
-    let vol = support::marschner_lobb(48);
-    let db = dir.path().join("ml.pxo");
-    support::import_volume(&vol, &db, 16, BrickEncoding::F32);
-    let tf = support::translucent();
+    let (vol, db, tf) = marschner_lobb_48(dir.path());
     let view = View::window([96, 72], [0.4, 0.3], [0.0, 0.0, 0.8]);
     let run = |z: f64, adaptive: bool| {
         let cfg = RenderConfig {
             adaptive_step: adaptive,
-            step_factor: 0.5,
+            // λ = 0.5 of the footprint, or half a voxel: exact_config's
+            // sub-pixel accuracy takes a quarter of the voxel step.
+            step_factor: if adaptive { 0.5 } else { 2.0 },
             ..support::exact_config()
         };
         let placement = Placement {
@@ -233,4 +247,75 @@ fn the_adaptive_step_follows_the_distance_from_the_eye() {
     let fixed = fixed_far / fixed_near;
     assert!((0.8..1.25).contains(&fixed), "the voxel step: {fixed:.2}");
     assert!(e_near < 4.0 * e_fixed.max(1e-4), "{e_near} vs {e_fixed}");
+}
+
+/// Sub-pixel accuracy (issue 40): below 1, `accuracy` asks for more than
+/// a finest-level voxel covering a pixel or more can give, so the step
+/// there shrinks by `accuracy`, to a quarter at most. Half the accuracy
+/// takes twice the samples and comes closer to the exact integral; just
+/// below 1 the image is the one at 1 to within the step's change.
+#[test]
+fn sub_pixel_accuracy_shrinks_the_finest_step() {
+    use parallax_backend::reference::{self, Tolerance};
+    let dir = tempfile::tempdir().unwrap();
+    let (vol, db, tf) = marschner_lobb_48(dir.path());
+    // A voxel covers 1.3-1.6 pixels.
+    let view = View::window([96, 72], [0.4, 0.3], [0.0, 0.0, 0.8]);
+    let placement = Placement {
+        center: [0.0, 0.0, 0.0],
+        rotation_deg: [20.0, 35.0, 0.0],
+        size: 0.3,
+    };
+    let reference = reference::render(&vol, &tf, &placement, &view, Tolerance { abs: 1e-5 });
+    let run = |accuracy: f64| {
+        let cfg = RenderConfig {
+            accuracy,
+            step_factor: 1.0,
+            ..support::exact_config()
+        };
+        let mut r = Renderer::new(&db, &cfg).unwrap();
+        r.set_transfer_function(1, &tf).unwrap();
+        r.count_samples = true;
+        let f = r.converge(&placement, &[view], &cfg, 64).unwrap();
+        support::assert_valid("sub-pixel accuracy", &f.images[0]);
+        let (rmse, _) = support::error(&f.images[0], &reference);
+        (
+            f.stats.samples as f64,
+            rmse,
+            f.stats.cut_leaves_with_data,
+            f.images[0].clone(),
+        )
+    };
+    let (s1, e1, b1, img1) = run(1.0);
+    let (s_near1, _, _, img_near1) = run(0.999);
+    let (s05, e05, b05, _) = run(0.5);
+    let (s025, e025, b025, _) = run(0.25);
+    let (s001, _, _, _) = run(0.01);
+    println!(
+        "sub-pixel accuracy: samples at 1 / 0.5 / 0.25 / 0.01: {s1} / {s05} / {s025} / {s001}; \
+         RMSE at 1 / 0.5 / 0.25: {e1:.2e} / {e05:.2e} / {e025:.2e}; bricks {b1} / {b05} / {b025}"
+    );
+    // The finest level throughout: only the step moves.
+    assert!(b1 == b05 && b05 == b025, "{b1} {b05} {b025}");
+    let r = |s: f64| s / s1;
+    assert!((1.8..2.2).contains(&r(s05)), "accuracy 0.5: {:.2}", r(s05));
+    assert!(
+        (3.6..4.4).contains(&r(s025)),
+        "accuracy 0.25: {:.2}",
+        r(s025)
+    );
+    // A quarter at most.
+    assert!((0.97..1.03).contains(&(s001 / s025)), "{s001} vs {s025}");
+    assert!(e025 < e05 && e05 < e1, "{e025:.2e} {e05:.2e} {e1:.2e}");
+    // Continuous at 1.
+    assert!((1.0..1.01).contains(&(s_near1 / s1)), "{s_near1} vs {s1}");
+    let d: f64 = img1
+        .iter()
+        .zip(&img_near1)
+        .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).abs()))
+        .fold(0.0, f64::max);
+    assert!(
+        d < 1e-2,
+        "accuracy 0.999 against 1: largest difference {d:.2e}"
+    );
 }

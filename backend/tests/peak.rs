@@ -20,7 +20,7 @@ use parallax_backend::volume::Volume;
 use parallax_common::camera::{Placement, View};
 use parallax_common::config::{Preintegration, RenderConfig};
 use parallax_common::tf::{ControlPoint, TransferFunction};
-use support::{assert_valid, error, exact_config, import_volume, marschner_lobb, mean_alpha};
+use support::{assert_valid, error, exact_at, import_volume, marschner_lobb, mean_alpha};
 
 /// Translucent material plus an extinction peak of τ = 3 one data value
 /// wide at 151, white on a blue background colour.
@@ -91,10 +91,7 @@ fn one_value_peak_converges_with_the_step() {
         import_volume(&peak.vol, &db, 8, enc);
         let mut errors = Vec::new();
         for &s in &steps {
-            let cfg = RenderConfig {
-                step_factor: s,
-                ..exact_config()
-            };
+            let cfg = exact_at(s);
             let (image, e, mx) = peak.render(&db, &cfg);
             let order = errors
                 .last()
@@ -158,9 +155,8 @@ fn the_two_d_table_on_the_peak_has_a_floor_and_the_closed_form_does_not() {
         let mut errors = Vec::new();
         for s in [0.25, 0.0625, 0.015625] {
             let cfg = RenderConfig {
-                step_factor: s,
                 preintegration: pre,
-                ..exact_config()
+                ..exact_at(s)
             };
             let (_, e, mx) = peak.render(&db, &cfg);
             eprintln!("{pre:?} step {s}: RMSE {e:.3e} max {mx:.3e}");

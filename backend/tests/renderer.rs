@@ -20,7 +20,9 @@ use parallax_common::tf::{ControlPoint, EmptinessTable, PreintTable, TransferFun
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use support::{assert_valid, exact_config, import_volume, marschner_lobb, mean_alpha, translucent};
+use support::{
+    assert_valid, exact_at, exact_config, import_volume, marschner_lobb, mean_alpha, translucent,
+};
 
 const COLIN27: &str = "/usr/share/mricron/templates/ch2.nii.gz";
 
@@ -192,7 +194,7 @@ fn coarser_settings_have_larger_error() {
             };
             for &step in steps {
                 let cfg = RenderConfig {
-                    step_factor: step,
+                    step_factor: exact_at(step).step_factor,
                     ..base.clone()
                 };
                 let f = r.converge(&placement, &[view], &cfg, 20).unwrap();

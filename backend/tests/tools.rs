@@ -117,10 +117,7 @@ fn context_returns_monotonically_as_the_view_turns_parallel() {
     // Nearly parallel rays, so that the part the plane keeps has the same
     // optical depth in all (up to sampling) whatever the plane's angle.
     let view = View::window([32, 32], [0.32, 0.32], [0.0, 0.0, 8.0]);
-    let cfg = RenderConfig {
-        step_factor: 0.5,
-        ..exact_config()
-    };
+    let cfg = support::exact_at(0.5);
     // Σ optical depth −ln(1 − α) over the image: the cut-away half counts
     // in proportion to how much μ lets through, the kept half the same at
     // every angle.
@@ -690,10 +687,7 @@ fn refraction_follows_snells_law() {
     let placement = centred([0.0; 3]);
     // Nearly parallel rays through the ball and around it.
     let view = View::window([40, 40], [0.24, 0.24], [0.0, 0.0, 4.0]);
-    let cfg = RenderConfig {
-        step_factor: 0.25,
-        ..exact_config()
-    };
+    let cfg = support::exact_at(0.25);
     let refracting = RenderConfig {
         refraction: true,
         ..cfg.clone()

@@ -1,7 +1,8 @@
 //! `parallax bench anisotropy`: the level of detail on thick slices.
 
 use crate::measure::{
-    converged, create_out, precise_config, timed_frame, write_table, Shot, CONVERGE_FRAMES,
+    converged, create_out, full_detail_step, precise_config, timed_frame, write_table, Shot,
+    CONVERGE_FRAMES, FULL_DETAIL,
 };
 use anyhow::Result;
 use parallax_backend::data::synth::{coord, shepp_logan};
@@ -98,7 +99,7 @@ fn volumes(mm: usize, default: f64) -> [(&'static str, [usize; 3], [f64; 3], Imp
                     false,
                     // The default, full detail, multilevel, and `accuracy`
                     // from 0.25 to 16 (the knob must move every level).
-                    [(default, false), (0.01, false), (default, true)]
+                    [(default, false), (FULL_DETAIL, false), (default, true)]
                         .into_iter()
                         .chain(
                             ACCURACY_SWEEP
@@ -248,6 +249,13 @@ fn measure(
         accuracy,
         multilevel,
         interpolation: Interpolation::Exact,
+        // Step 1/4 of a voxel at full detail and from accuracy 1 up;
+        // between, sub-pixel accuracy shrinks it at the finest level.
+        step_factor: if accuracy == FULL_DETAIL {
+            full_detail_step(0.25)
+        } else {
+            0.25
+        },
         ..precise_config()
     };
     let (mut r, _) = converged(shot, &cfg, &[], CONVERGE_FRAMES)?;

@@ -12,6 +12,18 @@ use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
 
+/// The base's accuracy: the finest level everywhere. Being below 1
+/// (sub-pixel accuracy), it also takes a quarter of `step_factor` there
+/// (the kernel's `leaf_step`, wherever a voxel covers more than 0.04
+/// pixels), so a study's step is set through [`full_detail_step`].
+pub const FULL_DETAIL: f64 = 0.01;
+
+/// The `step_factor` that samples the finest level every `s` voxels at
+/// [`FULL_DETAIL`].
+pub fn full_detail_step(s: f64) -> f64 {
+    4.0 * s
+}
+
 /// Frames a study's renderer may take to converge its cut.
 pub const CONVERGE_FRAMES: usize = 64;
 
@@ -20,8 +32,8 @@ pub const CONVERGE_FRAMES: usize = 64;
 /// optics), caches large enough for any test volume.
 pub fn precise_config() -> RenderConfig {
     RenderConfig {
-        accuracy: 0.01,
-        step_factor: 0.25,
+        accuracy: FULL_DETAIL,
+        step_factor: full_detail_step(0.25),
         early_termination: 1.0,
         visibility_feedback: false,
         shading: Shading::None,

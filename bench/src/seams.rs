@@ -1,7 +1,9 @@
 //! `parallax bench seams`: steps at level changes, one level of detail per
 //! brick against multilevel sampling (G10 §4, Fig. 5).
 
-use crate::measure::{converged_frame, create_out, precise_config, write_table, Shot};
+use crate::measure::{
+    converged_frame, create_out, full_detail_step, precise_config, write_table, Shot, FULL_DETAIL,
+};
 use anyhow::Result;
 use parallax_backend::metric::image_error;
 use parallax_backend::output::write_png;
@@ -95,12 +97,18 @@ pub fn seam_study(out: &Path, n: usize, resolution: [u32; 2]) -> Result<Vec<Seam
             accuracy,
             multilevel,
             interpolation: Interpolation::Exact,
+            // Step 1/4 of a voxel (full_detail_step at FULL_DETAIL).
+            step_factor: if accuracy == FULL_DETAIL {
+                full_detail_step(0.25)
+            } else {
+                0.25
+            },
             ..precise_config()
         };
         let (f, ms) = converged_frame(shot, &cfg)?;
         Ok((f.images[0].clone(), f.stats.cut_leaves_with_data, ms))
     };
-    let (full, _, _) = render(0.01, false)?;
+    let (full, _, _) = render(FULL_DETAIL, false)?;
     let interior = interior(&full, resolution);
     let mut points = Vec::new();
     for accuracy in [4.0, 8.0] {

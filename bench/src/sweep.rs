@@ -4,7 +4,9 @@
 //! as CSV, an SVG work–precision plot and the convergence order of each
 //! knob; then the cost of each kernel combination ([`crate::kernels`]).
 
-use crate::measure::{self, converged, precise_config, timed_frame, write_table, Shot};
+use crate::measure::{
+    self, converged, full_detail_step, precise_config, timed_frame, write_table, Shot,
+};
 use anyhow::Result;
 use parallax_backend::metric::image_error;
 use parallax_backend::reference::{self, Tolerance};
@@ -138,18 +140,24 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
         "step_factor",
         "full",
         &[0.0625, 0.125, 0.25, 0.5, 1.0, 2.0],
-        |c, s| c.step_factor = s,
+        |c, s| c.step_factor = full_detail_step(s),
     );
     add(
         "accuracy",
         "full",
         &[0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0],
-        |c, a| c.accuracy = a,
+        // At the base's step 1/4 (below 1, accuracy shrinks the finest
+        // level's step further: sub-pixel accuracy).
+        |c, a| {
+            c.accuracy = a;
+            c.step_factor = 0.25;
+        },
     );
     add("interpolation_exact", "full", &[1.0], |c, _| {
         c.interpolation = Interpolation::Exact
     });
     // L12's adaptive step (Eq. 3): step_factor 0.5 is λ = t·sin(θ/2).
+    // (No sub-pixel step with it: λ is the step.)
     add("adaptive_step", "full", &[0.25, 0.5, 1.0], |c, s| {
         c.step_factor = s;
         c.adaptive_step = true;
@@ -157,32 +165,33 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
     // Multilevel sampling (G10 §4): the accuracy sweep with levels blended.
     add("multilevel", "full", &[0.5, 1.0, 2.0, 4.0], |c, a| {
         c.accuracy = a;
+        c.step_factor = 0.25;
         c.multilevel = true;
     });
     // Tricubic B-spline filtering (L12 §5.1): the step sweep.
     add("tricubic", "full", &steps, |c, s| {
-        c.step_factor = s;
+        c.step_factor = full_detail_step(s);
         c.filter = Filter::Tricubic;
     });
     // The exact table (five reads a segment), which "auto" (the base)
     // leaves for the closed form on a CPU device where the function has one.
     add("preintegration_exact", "full", &steps, |c, s| {
-        c.step_factor = s;
+        c.step_factor = full_detail_step(s);
         c.preintegration = Preintegration::Exact;
     });
     // The 2D pre-integration table (one bilinear fetch a segment).
     add("preintegration_2d", "full", &steps, |c, s| {
-        c.step_factor = s;
+        c.step_factor = full_detail_step(s);
         c.preintegration = Preintegration::TwoD;
     });
     // The exact integral in closed form (no table read).
     add("preintegration_analytic", "full", &steps, |c, s| {
-        c.step_factor = s;
+        c.step_factor = full_detail_step(s);
         c.preintegration = Preintegration::Analytic;
     });
     // The old curve: no empty-space skipping inside bricks.
     add("step_factor_without_macrocells", "full", &steps, |c, s| {
-        c.step_factor = s;
+        c.step_factor = full_detail_step(s);
         c.macrocells = false;
     });
     add(
@@ -191,7 +200,9 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
         &[0.9, 0.95, 0.99, 0.995, 0.999],
         |c, e| c.early_termination = e,
     );
-    add("step_factor", "8-bit", &steps, |c, s| c.step_factor = s);
+    add("step_factor", "8-bit", &steps, |c, s| {
+        c.step_factor = full_detail_step(s)
+    });
     v
 }
 

@@ -4,7 +4,8 @@
 //! at full size), within 1e-2 of its exact integral; where the view is far,
 //! levels that halve the finer axes first must serve it with fewer bricks
 //! than levels that halve all three; `accuracy` from 0.25 to 16 moves
-//! through its levels, error and bricks monotone; and seen along the
+//! through its levels, error and bricks monotone (and below 1, where the
+//! finest level covers more pixels than asked, its step); and seen along the
 //! slices' normal, the step follows the thick edge (issue 40).
 
 use parallax_bench::anisotropy::anisotropy_study;
@@ -96,11 +97,27 @@ fn thick_slices_are_refined_like_isotropic_voxels() {
         }
         let mut distinct: Vec<u64> = sweep.iter().map(|p| p.bricks).collect();
         distinct.dedup();
+        // Distinct points of the work–precision plot: a coarser cut, or
+        // (at the finest level, below accuracy 1) a finer step.
+        let points = 1 + sweep
+            .windows(2)
+            .filter(|w| w[1].bricks != w[0].bricks || w[1].rmse > w[0].rmse * 1.001)
+            .count();
+        eprintln!("{view}: {points} distinct points over accuracy 0.25-16, cuts {distinct:?}");
         if view == "near" {
             assert!(
                 distinct.len() >= 3,
                 "near: bricks over the sweep {distinct:?}"
             );
+            // Accuracy 0.25 asks for more than the finest level's voxels
+            // (0.3 pixels) give: its step shrinks (sub-pixel accuracy).
+            assert!(
+                sweep[1].rmse > 1.2 * sweep[0].rmse,
+                "near: accuracy 0.25 {:.2e} against 0.5 {:.2e}",
+                sweep[0].rmse,
+                sweep[1].rmse
+            );
+            assert!(points >= 4, "near: {points} distinct points");
         }
         if view == "far" {
             assert!(

@@ -29,7 +29,7 @@ struct GpuFrame {
     rt1: vec4<f32>,
     rt2: vec4<f32>,
     center: vec4<f32>,    // placement centre (m); w = data units per metre
-    extent: vec4<f32>,    // N·s: the volume's box (data units)
+    extent: vec4<f32>,    // N·s: the volume's box (data units); w = sub-pixel accuracy (< 1; 0: off, leaf_step)
     domain: vec4<f32>,    // B·2^L·s: the root node's box (data units)
     spacing: vec4<f32>,   // s; w = min(s)
     tf: vec4<f32>,        // table vmin, bin width, bins, nodes per axis of the 2D table (0: none)

@@ -33,7 +33,7 @@ pub(super) fn frame_constants(
             pl.center[2] as f32,
             (1.0 / pl.scale(ext)) as f32,
         ],
-        extent: [ext[0] as f32, ext[1] as f32, ext[2] as f32, 0.0],
+        extent: [ext[0] as f32, ext[1] as f32, ext[2] as f32, s.sub_pixel],
         domain: [
             (root[0] * sp[0]) as f32,
             (root[1] * sp[1]) as f32,

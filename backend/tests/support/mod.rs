@@ -74,16 +74,26 @@ pub fn assert_valid(what: &str, img: &[[f32; 4]]) {
 
 /// Plain DVR, no shading, full-length rays, every leaf at full resolution,
 /// bricks interpolated with exact f32 weights (not by the texture unit):
-/// what the reference integral is compared with.
+/// what the reference integral is compared with. The step is 1/8 of a
+/// voxel: accuracy 0.01 (sub-pixel) takes a quarter of `step_factor` at the
+/// finest level, so a test that sets `step_factor` gets a quarter of it.
 pub fn exact_config() -> RenderConfig {
     RenderConfig {
         shading: Shading::None,
-        step_factor: 0.125,
+        step_factor: 0.5,
         early_termination: 1.0,
         accuracy: 0.01,
         visibility_feedback: false,
         interpolation: Interpolation::Exact,
         ..RenderConfig::default()
+    }
+}
+
+/// [`exact_config`] stepping `step` voxels at the finest level.
+pub fn exact_at(step: f64) -> RenderConfig {
+    RenderConfig {
+        step_factor: step / 0.25,
+        ..exact_config()
     }
 }
 
