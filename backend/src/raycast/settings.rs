@@ -57,8 +57,9 @@ pub struct RenderSettings {
     /// 0 (off). Where a leaf of the finest level covers more than that many
     /// pixels, no finer data exists to refine to, so its step shrinks
     /// instead, by accuracy / min(p, 1) (p: its voxel's smallest edge over
-    /// the pixel's cone at the leaf's entry), to a quarter at most. Plain
-    /// DVR only (an isosurface's sparse steps follow its own rule).
+    /// the pixel's cone at the leaf's entry), to a quarter at most. Not for
+    /// isosurfaces (their sparse steps follow their own rule) nor with
+    /// `adaptive_step` (whose step is the footprint's already).
     pub sub_pixel: f32,
     /// Multilevel sampling (G10 §4, Fig. 5): samples blend the leaf's data
     /// with its parent's and grandparent's as the view's footprint asks,
