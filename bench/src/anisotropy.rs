@@ -1,7 +1,7 @@
 //! `parallax bench anisotropy`: the level of detail on thick slices.
 
 use crate::measure::{
-    converged, create_out, full_detail_step, precise_config, timed_frame, write_table, Shot,
+    converged, create_out, precise_config, precise_step, timed_frame, write_table, Shot,
     CONVERGE_FRAMES, FULL_DETAIL,
 };
 use anyhow::Result;
@@ -249,13 +249,7 @@ fn measure(
         accuracy,
         multilevel,
         interpolation: Interpolation::Exact,
-        // Step 1/4 of a voxel at full detail and from accuracy 1 up;
-        // between, sub-pixel accuracy shrinks it at the finest level.
-        step_factor: if accuracy == FULL_DETAIL {
-            full_detail_step(0.25)
-        } else {
-            0.25
-        },
+        step_factor: precise_step(accuracy),
         ..precise_config()
     };
     let (mut r, _) = converged(shot, &cfg, &[], CONVERGE_FRAMES)?;

@@ -24,6 +24,18 @@ pub fn full_detail_step(s: f64) -> f64 {
     4.0 * s
 }
 
+/// The base's step, 1/4 of a voxel, as `step_factor` at `accuracy`: at
+/// [`FULL_DETAIL`] through [`full_detail_step`]; at any other accuracy 1/4
+/// itself (below 1 sub-pixel accuracy shrinks it further at the finest
+/// level: that is the knob's own doing).
+pub fn precise_step(accuracy: f64) -> f64 {
+    if accuracy == FULL_DETAIL {
+        full_detail_step(0.25)
+    } else {
+        0.25
+    }
+}
+
 /// Frames a study's renderer may take to converge its cut.
 pub const CONVERGE_FRAMES: usize = 64;
 
@@ -33,7 +45,7 @@ pub const CONVERGE_FRAMES: usize = 64;
 pub fn precise_config() -> RenderConfig {
     RenderConfig {
         accuracy: FULL_DETAIL,
-        step_factor: full_detail_step(0.25),
+        step_factor: precise_step(FULL_DETAIL),
         early_termination: 1.0,
         visibility_feedback: false,
         shading: Shading::None,

@@ -2,7 +2,7 @@
 //! brick against multilevel sampling (G10 §4, Fig. 5).
 
 use crate::measure::{
-    converged_frame, create_out, full_detail_step, precise_config, write_table, Shot, FULL_DETAIL,
+    converged_frame, create_out, precise_config, precise_step, write_table, Shot, FULL_DETAIL,
 };
 use anyhow::Result;
 use parallax_backend::metric::image_error;
@@ -97,12 +97,7 @@ pub fn seam_study(out: &Path, n: usize, resolution: [u32; 2]) -> Result<Vec<Seam
             accuracy,
             multilevel,
             interpolation: Interpolation::Exact,
-            // Step 1/4 of a voxel (full_detail_step at FULL_DETAIL).
-            step_factor: if accuracy == FULL_DETAIL {
-                full_detail_step(0.25)
-            } else {
-                0.25
-            },
+            step_factor: precise_step(accuracy),
             ..precise_config()
         };
         let (f, ms) = converged_frame(shot, &cfg)?;

@@ -5,7 +5,7 @@
 //! knob; then the cost of each kernel combination ([`crate::kernels`]).
 
 use crate::measure::{
-    self, converged, full_detail_step, precise_config, timed_frame, write_table, Shot,
+    self, converged, full_detail_step, precise_config, precise_step, timed_frame, write_table, Shot,
 };
 use anyhow::Result;
 use parallax_backend::metric::image_error;
@@ -146,11 +146,9 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
         "accuracy",
         "full",
         &[0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0],
-        // At the base's step 1/4 (below 1, accuracy shrinks the finest
-        // level's step further: sub-pixel accuracy).
         |c, a| {
             c.accuracy = a;
-            c.step_factor = 0.25;
+            c.step_factor = precise_step(a);
         },
     );
     add("interpolation_exact", "full", &[1.0], |c, _| {
@@ -165,7 +163,7 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
     // Multilevel sampling (G10 §4): the accuracy sweep with levels blended.
     add("multilevel", "full", &[0.5, 1.0, 2.0, 4.0], |c, a| {
         c.accuracy = a;
-        c.step_factor = 0.25;
+        c.step_factor = precise_step(a);
         c.multilevel = true;
     });
     // Tricubic B-spline filtering (L12 §5.1): the step sweep.
