@@ -47,6 +47,25 @@ override COUNT_SAMPLES: bool = false;
 // saved nothing measurable, and it adds a fetch at each leaf's end: those
 // kernels keep the plain loop.
 override LOOKAHEAD: bool = false;
+// Opaque-segment refinement (`RenderConfig::refinement`): a segment whose
+// own optical depth τ̄·h exceeds REFINE_DEPTH, met while the ray's opacity
+// is below REFINE_ALPHA, is not composited but marched again in
+// `frame.optics.w` equal parts. Pre-integration is exact for a scalar
+// linear between samples; the field's departure from its chord, O(h²),
+// sets the pixel where one segment is optically thick (where inside it the
+// opacity accrues), and P parts cut it by P². Set by the CPU only where
+// the transfer function and the cut's longest step allow such a segment
+// (backend/src/raycast/mod.rs `can_be_opaque`); not for isosurfaces,
+// refraction (a bend per sample) or registered layers.
+override REFINE: bool = false;
+const REFINE_DEPTH: f32 = 2.0;
+fn refines() -> bool {
+    return REFINE && !ISO && LAYERS == 0u && !REFRACTION;
+}
+// Once the ray's transmittance is below 1/256, a segment can change the
+// pixel by less than that: no refinement (with early termination off, the
+// segments behind a surface would otherwise all be refined).
+const REFINE_ALPHA: f32 = 1.0 - 1.0 / 256.0;
 
 // The distance from `p` along `d` (unit, 1/d in `inv_d`) to where the ray
 // enters the first non-empty macrocell of `leaf` within `len`, or 3e38 when
@@ -132,6 +151,32 @@ fn next_sample(ray: ptr<function, Ray>, t: f32, h: f32, k: ptr<function, u32>, t
     if (tn >= tk) {
         *k = *k + 1u;
     }
+    return tn;
+}
+
+// `next_sample` where `moving`, else the same place without moving k on.
+fn grid_next(ray: ptr<function, Ray>, t: f32, h: f32, k: ptr<function, u32>, tc: f32,
+             t_exit: f32, moving: bool) -> f32 {
+    let tk = t + f32(*k) * h;
+    var tn = min(tk, t_exit);
+    if (HAS_BREAKS) {
+        tn = min(tn, next_break(ray, tc));
+    }
+    *k = *k + select(0u, 1u, moving && tn >= tk);
+    return tn;
+}
+
+// The next sample of a refined segment from t0 to t1 (`frame.optics.w` equal
+// parts, t0 + k·(t1 − t0)/parts) where `moving`, moving k on only there.
+fn fine_next(ray: ptr<function, Ray>, t0: f32, t1: f32, k: ptr<function, u32>, tc: f32,
+             moving: bool) -> f32 {
+    let parts = u32(frame.optics.w);
+    let tk = select(mix(t0, t1, f32(*k) / frame.optics.w), t1, *k >= parts);
+    var tn = tk;
+    if (HAS_BREAKS) {
+        tn = min(tn, next_break(ray, tc));
+    }
+    *k = *k + select(0u, 1u, moving && tn >= tk);
     return tn;
 }
 
@@ -387,16 +432,27 @@ fn cells_skip(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t: f32, 
 fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f32>,
                      d: vec3<f32>, tc: f32, tn: f32, s_prev: f32, s: f32, e_prev: TfEnd,
                      e: TfEnd, ls: LayerSeg, layer_w: vec3<f32>) -> Sample {
-    var avg: vec4<f32>;
+    return composite_average(acc, lv, blend, o, d, tc, tn, s_prev, s,
+                             preintegrated(s_prev, s, e_prev, e), ls, layer_w);
+}
+
+// The volume's pre-integrated average (τ̄, τ̄·c̄) over the data segment from
+// s_prev to s.
+fn preintegrated(s_prev: f32, s: f32, e_prev: TfEnd, e: TfEnd) -> vec4<f32> {
     if (ANALYTIC_PREINT) {
-        avg = analytic_average(s_prev, s);
+        return analytic_average(s_prev, s);
     } else if (GRID_PREINT) {
-        avg = grid_average(s_prev, s);
+        return grid_average(s_prev, s);
     } else if (END_PREINT) {
-        avg = end_average(e_prev, e);
-    } else {
-        avg = segment_average(0u, frame.counts.w, s_prev, s);
+        return end_average(e_prev, e);
     }
+    return segment_average(0u, frame.counts.w, s_prev, s);
+}
+
+fn composite_average(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f32>,
+                     d: vec3<f32>, tc: f32, tn: f32, s_prev: f32, s: f32, avg_in: vec4<f32>,
+                     ls: LayerSeg, layer_w: vec3<f32>) -> Sample {
+    var avg = avg_in;
     let vol_tau = select(0.0, avg.x, (ls.mask & 1u) != 0u);
     if (LAYERS > 0u) {
         // The summed medium of the volume and its registered layers.
@@ -639,6 +695,10 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             tn_next = next_sample(&ray, t, h, &k, tc, t_exit);
             s_next = sample_levels(lv, blend, o + d * tn_next);
         }
+        var fine = false;
+        var t_fine = 0.0;
+        var fine_end = 0.0;
+        var k_fine = 0u;
         loop {
             // An all-empty leaf ends with its starting sample, at its exit.
             if (tc >= t_exit) {
@@ -647,7 +707,19 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             var tn: f32;
             var s: f32;
             var lay = vec3<f32>(0.0);
-            if (LOOKAHEAD) {
+            if (LOOKAHEAD && refines()) {
+                // Inside a refined segment each pass fetches its own
+                // sample; the leaf's next one, fetched ahead, waits in
+                // (tn_next, s_next). One fetch, placed by selects.
+                let ahead = !fine && tn_next < t_exit;
+                let tg = grid_next(&ray, t, h, &k, tn_next, t_exit, ahead);
+                let tf = fine_next(&ray, t_fine, fine_end, &k_fine, tc, fine);
+                let v = sample_levels(lv, blend, o + d * select(tg, tf, fine));
+                tn = select(tn_next, tf, fine);
+                s = select(s_next, v, fine);
+                tn_next = select(tn_next, tg, ahead);
+                s_next = select(s_next, v, ahead);
+            } else if (LOOKAHEAD) {
                 tn = tn_next;
                 s = s_next;
                 if (tn < t_exit) {
@@ -655,7 +727,13 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                     s_next = sample_levels(lv, blend, o + d * tn_next);
                 }
             } else {
-                tn = next_sample(&ray, t, h, &k, tc, t_exit);
+                if (refines()) {
+                    let tg = grid_next(&ray, t, h, &k, tc, t_exit, !fine);
+                    let tf = fine_next(&ray, t_fine, fine_end, &k_fine, tc, fine);
+                    tn = select(tg, tf, fine);
+                } else {
+                    tn = next_sample(&ray, t, h, &k, tc, t_exit);
+                }
                 if (LAYERS > 0u) {
                     let v = sample_layered(leaf, o + d * tn);
                     s = leaf.range.x + leaf.range.y * v.x;
@@ -693,8 +771,16 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 }
                 continue;
             }
-            let smp = composite_segment(&acc, lv, blend, o, d, tc, tn, s_prev, s, e_prev, e,
-                                        LayerSeg(lay_prev, lay, le_prev, le, mask & mask_prev),
+            let segment = LayerSeg(lay_prev, lay, le_prev, le, mask & mask_prev);
+            let avg = preintegrated(s_prev, s, e_prev, e);
+            if (refines() && !fine && avg.x * (tn - tc) > REFINE_DEPTH && acc.alpha < REFINE_ALPHA) {
+                fine = true;
+                t_fine = tc;
+                k_fine = 1u;
+                fine_end = tn;
+                continue;
+            }
+            let smp = composite_average(&acc, lv, blend, o, d, tc, tn, s_prev, s, avg, segment,
                                         layer_w);
             s_prev = s;
             e_prev = e;
@@ -702,6 +788,9 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             le_prev = le;
             mask_prev = mask;
             tc = tn;
+            if (refines() && fine && tc >= fine_end) {
+                fine = false;
+            }
             if (record_depth && depth_t < 0.0 && acc.alpha >= 0.5) {
                 depth_t = t_base + tc;
             }

@@ -881,6 +881,7 @@ impl Renderer {
             tile_culling: self.tile_culling,
             lookahead: self.lookahead,
             adaptive_step: cfg.adaptive_step,
+            refinement: cfg.refinement,
             sub_pixel: if cfg.accuracy < 1.0 {
                 cfg.accuracy as f32
             } else {

@@ -348,7 +348,12 @@ fn view_dependent_opacity_follows_the_smoothstep() {
     // A narrow view along −z: every ray within 1.1° of (0, 0, −1), at about
     // 180° to +z.
     let view = View::window([48, 48], [0.03, 0.03], [0.0, 0.0, 0.8]);
-    let cfg = RenderConfig::default();
+    // Layered kernels march without the opaque-segment refinement
+    // (`refinement`), so the volume alone is drawn without it too.
+    let cfg = RenderConfig {
+        refinement: 1,
+        ..RenderConfig::default()
+    };
     let with = |opacity: f64, view_opacity: Option<ViewOpacity>| {
         let l = Layer {
             opacity,

@@ -41,6 +41,7 @@ pub fn work_precision(path: &Path, points: &[Point]) -> Result<()> {
         ("preintegration_analytic", "full", RGBColor(200, 0, 120)),
         ("accuracy", "full", BLUE),
         ("early_termination", "full", GREEN),
+        ("refinement", "full", RGBColor(200, 160, 0)),
         ("step_factor", "8-bit", MAGENTA),
     ];
     for (knob, bricks, color) in series {

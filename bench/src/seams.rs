@@ -98,6 +98,10 @@ pub fn seam_study(out: &Path, n: usize, resolution: [u32; 2]) -> Result<Vec<Seam
             multilevel,
             interpolation: Interpolation::Exact,
             step_factor: precise_step(accuracy),
+            // The step at a level change is the levels' data; the opaque
+            X
+            // here (each level's chord error is most of it), so it is off.
+            refinement: 1,
             ..precise_config()
         };
         let (f, ms) = converged_frame(shot, &cfg)?;

@@ -192,6 +192,13 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
         c.step_factor = full_detail_step(s);
         c.macrocells = false;
     });
+    // Opaque-segment refinement at the default accuracy and step: parts
+    // 1 (off) to 8 (`RenderConfig::refinement`).
+    add("refinement", "full", &[1.0, 2.0, 4.0, 8.0], |c, r| {
+        c.accuracy = 1.0;
+        c.step_factor = 0.5;
+        c.refinement = r as u32;
+    });
     add(
         "early_termination",
         "full",
@@ -350,7 +357,7 @@ mod tests {
     fn every_knob_changes_the_base() {
         let base = precise_config();
         let s = settings(&base);
-        assert_eq!(s.len(), 50);
+        assert_eq!(s.len(), 54);
         // Each setting differs from the base, except the sweep's own base
         // step (0.25) of the plain step knobs.
         let same: Vec<_> = s

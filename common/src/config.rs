@@ -124,6 +124,24 @@ pub struct RenderConfig {
     /// tricubic B-spline of L12 §5.1 (eight trilinear lookups a sample).
     #[serde(default = "trilinear")]
     pub filter: Filter,
+    /// Opaque-segment refinement (issue 40), R parts: a segment whose own
+    /// optical depth τ̄·h exceeds 2 while the ray is still more than 1/256
+    /// transparent is marched again in R equal parts up to `step_factor`
+    /// 1, in R / `step_factor` (rounded) above, none from 4R/3 up; R = 1
+    /// is off. Pre-integration (Engel, Kraus and Ertl 2001) is exact for a
+    /// scalar linear between samples; the trilinear field departs from its
+    /// chord by O(h²) (h²·|s''|/8), which sets the pixel where one segment
+    /// is optically thick: there the colour is where inside it the opacity
+    /// accrues. P parts cut that by P²; thin segments are left as they
+    /// were. It is Danskin and Hanrahan's (1992) idea of spending samples
+    /// where opacity accrues, applied to the segments that need it. A
+    /// thick-slice CT under CT-Soft-Tissue at 512²: RMSE 5.1e-2 → 4.1e-3
+    /// for 5 % more time at R = 4 (docs/performance.md, "Opaque segments").
+    /// Kernels whose function and steps cannot make such a segment leave
+    /// it out. Isosurfaces, refraction and registered layers march as
+    /// before.
+    #[serde(default = "default_refinement")]
+    pub refinement: u32,
     /// How a segment's average optics are looked up: "exact" (the
     /// pre-integration table of the transfer function's own breakpoints,
     /// exact for the linear scalar between samples) or "2d" (the classic 2D
@@ -199,6 +217,10 @@ fn trilinear() -> Filter {
 /// "Isosurfaces and the prediction buffer").
 fn default_kappa() -> [f64; 2] {
     [0.5, 1.0]
+}
+
+fn default_refinement() -> u32 {
+    4
 }
 
 fn default_full_every() -> u32 {
@@ -656,6 +678,13 @@ impl Scene {
                 "{}: render.step_factor must be in (0, 8] (got {})",
                 f.display(),
                 r.step_factor
+            );
+        }
+        if !(1..=16).contains(&r.refinement) {
+            bail!(
+                "{}: render.refinement must be in 1..=16 parts (1: off; got {})",
+                f.display(),
+                r.refinement
             );
         }
         if !(r.early_termination > 0.0 && r.early_termination <= 1.0) {

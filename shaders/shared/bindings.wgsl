@@ -37,7 +37,7 @@ struct GpuFrame {
     light: vec4<f32>,     // Phong ka, kd, ks, shininess
     counts: vec4<u32>,    // B, leaf level L, table levels, running-integral offset (0: none)
     pool: vec4<u32>,      // slots per axis x, y, z; stored brick side B + 2·OVERLAP
-    optics: vec4<f32>,    // MImDA γ, the transfer function's largest importance, record depth (1: the overlay's depth combination), 0
+    optics: vec4<f32>,    // MImDA γ, the transfer function's largest importance, record depth (1: the overlay's depth combination), the refinement's parts
     aux: vec4<u32>,       // (ι, ν, 0, 0) table: first entry, running-integral offset (0: none); macrocells per brick axis C, voxels per cell side M
     iso: vec4<f32>,       // isovalue, the surface's linear RGB colour (mode "iso")
     predict: vec4<f32>,   // prediction buffer: mode (0 off, 1 full traversal, 2 predicted), local window (data units), κ low, κ high

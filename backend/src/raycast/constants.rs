@@ -70,7 +70,7 @@ pub(super) fn frame_constants(
             s.gamma,
             tf.max_importance,
             if s.record_depth { 1.0 } else { 0.0 },
-            0.0,
+            s.refine_parts() as f32,
         ],
         aux: [
             tf.aux_base,

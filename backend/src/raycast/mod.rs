@@ -71,7 +71,7 @@ pub struct Raycaster {
     /// One pipeline per combination of stepper, enhancers and shading that
     /// a frame has used (G10 §5: a kernel specialised for what the scene
     /// uses), built when first needed.
-    pipelines: HashMap<(KernelKey, [bool; 11], u32), wgpu::ComputePipeline>,
+    pipelines: HashMap<(KernelKey, [bool; 12], u32), wgpu::ComputePipeline>,
     /// The pool holds f32 values (else 8-bit codes).
     float_pool: bool,
     /// A small uniform buffer for the enhancers' parameters.
@@ -93,6 +93,52 @@ pub struct RenderInputs<'a> {
     pub views: &'a [View],
     pub settings: &'a RenderSettings,
 }
+
+/// Whether a segment of this frame can have an optical depth above 2, the
+/// opaque-segment refinement's threshold (`refinement`): the transfer
+/// function's largest extinction over the longest step of the cut's
+/// coarsest leaf with data (`step_factor` × its voxel's longest edge; any
+/// step with the adaptive one). Where it cannot, the kernel leaves the
+/// refinement out and costs what it did without it.
+fn can_be_opaque(
+    index: &SpatialIndex,
+    scene: &SceneGeometry,
+    max_extinction: f32,
+    settings: &RenderSettings,
+) -> bool {
+    if max_extinction <= 0.0 {
+        return false;
+    }
+    if settings.adaptive_step {
+        return true;
+    }
+    let Some(coarsest) = index
+        .nodes
+        .iter()
+        .filter(|n| n.slot().is_some())
+        .map(|n| n.level())
+        .min()
+    else {
+        return false;
+    };
+    let l = &scene.geom.layout;
+    let edge = (0..3)
+        .map(|a| {
+            let upto = if coarsest >= 31 {
+                u32::MAX
+            } else {
+                (2u32 << coarsest) - 1
+            };
+            let above = l.splits[a].count_ones() - (l.splits[a] & upto).count_ones();
+            scene.geom.spacing[a] * f64::from(1u32 << above.min(31))
+        })
+        .fold(0.0, f64::max);
+    f64::from(max_extinction) * f64::from(settings.step_factor) * edge > REFINE_DEPTH
+}
+
+/// The optical depth above which a segment is refined (the kernel's
+/// REFINE_DEPTH).
+const REFINE_DEPTH: f64 = 2.0;
 
 impl Raycaster {
     /// A ray caster for pools of `float` (r32float) or 8-bit bricks. Asked
@@ -396,6 +442,10 @@ impl Raycaster {
             && !k.iso
             && tf.grid.is_some();
         let lookahead = settings.lookahead && self.float_pool && (grid || closed) && !layered;
+        let refine = settings.refine_parts() > 1
+            && !k.iso
+            && !layered
+            && can_be_opaque(inputs.index, inputs.scene, tf.max_extinction, settings);
         self.pipeline(
             gpu,
             &settings.kernel,
@@ -411,6 +461,7 @@ impl Raycaster {
                 closed,
                 lookahead,
                 tool_tiles,
+                refine,
             ],
             closed_pieces.unwrap_or(0),
         )

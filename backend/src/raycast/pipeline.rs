@@ -11,10 +11,10 @@ impl Raycaster {
         &mut self,
         gpu: &Gpu,
         kernel: &KernelKey,
-        flags: [bool; 11],
+        flags: [bool; 12],
         tf_pieces: u32,
     ) -> Result<&wgpu::ComputePipeline> {
-        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint, grid_preint, analytic_preint, lookahead, tool_tiles] =
+        let [shading, no_data, macrocells, count, multilevel, tricubic, end_preint, grid_preint, analytic_preint, lookahead, tool_tiles, refine] =
             flags;
         let key = (kernel.clone(), flags, tf_pieces);
         if !self.pipelines.contains_key(&key) {
@@ -51,6 +51,9 @@ impl Raycaster {
                 // The variant for the tiles that meet a tool's region: only
                 // it computes what the enhancers read (`tiles::flag_regions`).
                 ("TOOL_TILES", flag(tool_tiles)),
+                // Opaque-segment refinement compiled in (`Raycaster::kernel`
+                // says where a segment can be optically thick).
+                ("REFINE", flag(refine)),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
                 (

@@ -96,6 +96,7 @@ pub const OVERRIDES: &[&str] = &[
     "TF_PIECES",
     "LOOKAHEAD",
     "TOOL_TILES",
+    "REFINE",
 ];
 
 /// One specialised kernel: the stepper and the enhancer chain.
@@ -530,9 +531,9 @@ mod tests {
             );
         }
         // The override combinations of the plain and the fullest
-        // kernels: every combination of all but the last, which takes
-        // the parity of the others' values, so that it meets both
-        // values of every other override and every pair of them. The
+        // kernels: every combination of all but the last two, which
+        // follow from the others' values (below), so that each meets
+        // both values of every other override and every pair of them. The
         // three pre-integration paths, of which a pipeline sets at most
         // one, count as one override of four values (two bits), and
         // TF_PIECES, a count, takes its largest value (the whole
@@ -544,11 +545,16 @@ mod tests {
                 .copied()
                 .filter(|n| *n != "TF_PIECES" && !PATHS.contains(n))
                 .collect();
-            // The path's two bits come first, then the flags.
-            let n = 2 + flags.len() - 1;
+            // The path's two bits come first, then the flags. The last
+            // two flags follow from the others: the last is their parity,
+            // the one before it that parity flipped by the first bit.
+            // Each flag still meets both values of every other, and every
+            // pair of them all four combinations, in half the runs.
+            let n = 2 + flags.len() - 2;
             for bits in 0..1u32 << n {
                 let mut constants = naga::back::PipelineConstants::default();
-                let bits = bits | (bits.count_ones() & 1) << n;
+                let parity = bits.count_ones() & 1;
+                let bits = bits | (parity ^ (bits & 1)) << n | parity << (n + 1);
                 for (i, p) in PATHS.iter().enumerate() {
                     constants.insert(p.to_string(), f64::from(bits & 3 == i as u32 + 1));
                 }

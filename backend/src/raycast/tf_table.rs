@@ -30,6 +30,9 @@ pub struct TfTable {
     pub(super) aux_prefix: u32,
     /// ι_max of the transfer function (MImDA's termination estimate).
     pub(super) max_importance: f32,
+    /// The largest extinction of the volume's function (whether a segment
+    /// can be optically thick: `Raycaster::kernel`).
+    pub(super) max_extinction: f32,
     /// Whether the march pre-integrates from the segments' ends
     /// (preint.wgsl `end_average`), and whether the table allows it: a
     /// running integral, and bin integrals within [`END_RANGE`] of each
@@ -193,6 +196,7 @@ impl TfTable {
             aux_base,
             aux_prefix,
             max_importance: max_importance as f32,
+            max_extinction: tf.max_extinction() as f32,
             id: next_resource_id(),
             layers: layer_params,
             layers_end,
