@@ -99,7 +99,7 @@ pub fn seam_study(out: &Path, n: usize, resolution: [u32; 2]) -> Result<Vec<Seam
             interpolation: Interpolation::Exact,
             step_factor: precise_step(accuracy),
             // The step at a level change is the levels' data; the opaque
-            X
+            // segments' refinement alone takes it from 9.5e-3 to 1.3e-3
             // here (each level's chord error is most of it), so it is off.
             refinement: 1,
             ..precise_config()
