@@ -50,15 +50,17 @@ override LOOKAHEAD: bool = false;
 // Opaque-segment refinement (`RenderConfig::refinement`): a segment whose
 // own optical depth τ̄·h exceeds REFINE_DEPTH, met while the ray's opacity
 // is below REFINE_ALPHA, is not composited but marched again in
-// `frame.optics.w` equal parts. Pre-integration is exact for a scalar
-// linear between samples; the field's departure from its chord, O(h²),
-// sets the pixel where one segment is optically thick (where inside it the
-// opacity accrues), and P parts cut it by P². Set by the CPU only where
-// the transfer function and the cut's longest step allow such a segment
-// (backend/src/raycast/mod.rs `can_be_opaque`); not for isosurfaces,
-// refraction (a bend per sample) or registered layers.
+// ⌈τ̄·h / REFINE_DEPTH⌉ equal parts, at most `frame.optics.w`, so that the
+// parts' step shrinks steadily with the segment's, never jumping back up.
+// Pre-integration is exact for a scalar linear between samples; the
+// field's departure from its chord, O(h²), sets the pixel where one
+// segment is optically thick (where inside it the opacity accrues), and P
+// parts cut it by P². Set by the CPU only where the transfer function and
+// the cut's longest step allow such a segment (backend/src/raycast/mod.rs
+// `can_be_opaque`); not for isosurfaces, refraction (a bend per sample) or
+// registered layers.
 override REFINE: bool = false;
-const REFINE_DEPTH: f32 = 2.0;
+const REFINE_DEPTH: f32 = 1.0;
 fn refines() -> bool {
     return REFINE && !ISO && LAYERS == 0u && !REFRACTION;
 }
@@ -166,12 +168,11 @@ fn grid_next(ray: ptr<function, Ray>, t: f32, h: f32, k: ptr<function, u32>, tc:
     return tn;
 }
 
-// The next sample of a refined segment from t0 to t1 (`frame.optics.w` equal
-// parts, t0 + k·(t1 − t0)/parts) where `moving`, moving k on only there.
-fn fine_next(ray: ptr<function, Ray>, t0: f32, t1: f32, k: ptr<function, u32>, tc: f32,
-             moving: bool) -> f32 {
-    let parts = u32(frame.optics.w);
-    let tk = select(mix(t0, t1, f32(*k) / frame.optics.w), t1, *k >= parts);
+// The next sample of a refined segment from t0 to t1 (`parts` equal parts,
+// t0 + k·(t1 − t0)/parts) where `moving`, moving k on only there.
+fn fine_next(ray: ptr<function, Ray>, t0: f32, t1: f32, parts: f32, k: ptr<function, u32>,
+             tc: f32, moving: bool) -> f32 {
+    let tk = select(mix(t0, t1, f32(*k) / parts), t1, f32(*k) >= parts);
     var tn = tk;
     if (HAS_BREAKS) {
         tn = min(tn, next_break(ray, tc));
@@ -699,6 +700,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
         var t_fine = 0.0;
         var fine_end = 0.0;
         var k_fine = 0u;
+        var parts_fine = 1.0;
         loop {
             // An all-empty leaf ends with its starting sample, at its exit.
             if (tc >= t_exit) {
@@ -713,7 +715,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
                 // (tn_next, s_next). One fetch, placed by selects.
                 let ahead = !fine && tn_next < t_exit;
                 let tg = grid_next(&ray, t, h, &k, tn_next, t_exit, ahead);
-                let tf = fine_next(&ray, t_fine, fine_end, &k_fine, tc, fine);
+                let tf = fine_next(&ray, t_fine, fine_end, parts_fine, &k_fine, tc, fine);
                 let v = sample_levels(lv, blend, o + d * select(tg, tf, fine));
                 tn = select(tn_next, tf, fine);
                 s = select(s_next, v, fine);
@@ -729,7 +731,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             } else {
                 if (refines()) {
                     let tg = grid_next(&ray, t, h, &k, tc, t_exit, !fine);
-                    let tf = fine_next(&ray, t_fine, fine_end, &k_fine, tc, fine);
+                    let tf = fine_next(&ray, t_fine, fine_end, parts_fine, &k_fine, tc, fine);
                     tn = select(tg, tf, fine);
                 } else {
                     tn = next_sample(&ray, t, h, &k, tc, t_exit);
@@ -773,8 +775,10 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             }
             let segment = LayerSeg(lay_prev, lay, le_prev, le, mask & mask_prev);
             let avg = preintegrated(s_prev, s, e_prev, e);
-            if (refines() && !fine && avg.x * (tn - tc) > REFINE_DEPTH && acc.alpha < REFINE_ALPHA) {
+            let depth = avg.x * (tn - tc);
+            if (refines() && !fine && depth > REFINE_DEPTH && acc.alpha < REFINE_ALPHA) {
                 fine = true;
+                parts_fine = min(frame.optics.w, ceil(depth / REFINE_DEPTH));
                 t_fine = tc;
                 k_fine = 1u;
                 fine_end = tn;

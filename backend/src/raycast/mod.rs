@@ -94,7 +94,7 @@ pub struct RenderInputs<'a> {
     pub settings: &'a RenderSettings,
 }
 
-/// Whether a segment of this frame can have an optical depth above 2, the
+/// Whether a segment of this frame can have an optical depth above 1, the
 /// opaque-segment refinement's threshold (`refinement`): the transfer
 /// function's largest extinction over the longest step of the cut's
 /// coarsest leaf with data (`step_factor` × its voxel's longest edge; any
@@ -138,7 +138,7 @@ fn can_be_opaque(
 
 /// The optical depth above which a segment is refined (the kernel's
 /// REFINE_DEPTH).
-const REFINE_DEPTH: f64 = 2.0;
+const REFINE_DEPTH: f64 = 1.0;
 
 impl Raycaster {
     /// A ray caster for pools of `float` (r32float) or 8-bit bricks. Asked

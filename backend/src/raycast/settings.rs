@@ -62,8 +62,9 @@ pub struct RenderSettings {
     /// `adaptive_step` (whose step is the footprint's already).
     pub sub_pixel: f32,
     /// Opaque-segment refinement (`RenderConfig::refinement`, R): a
-    /// segment of optical depth above 2, met while the ray's opacity is
-    /// below 1 − 1/256, is marched again in [`Self::refine_parts`] parts;
+    /// segment of optical depth d above 1, met while the ray's opacity is
+    /// below 1 − 1/256, is marched again in ⌈d⌉ parts, at most
+    /// [`Self::refine_parts`];
     /// R = 1 is off. The kernel has it compiled in only where the transfer
     /// function and the cut's longest step can make such a segment
     /// ([`super::Raycaster`]'s `kernel`), so that translucent functions
