@@ -145,18 +145,11 @@ fn cells_start(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t0: f32
 // when the grid point itself is taken.
 fn next_sample(ray: ptr<function, Ray>, t: f32, h: f32, k: ptr<function, u32>, tc: f32,
                t_exit: f32) -> f32 {
-    let tk = t + f32(*k) * h;
-    var tn = min(tk, t_exit);
-    if (HAS_BREAKS) {
-        tn = min(tn, next_break(ray, tc));
-    }
-    if (tn >= tk) {
-        *k = *k + 1u;
-    }
-    return tn;
+    return grid_next(ray, t, h, k, tc, t_exit, true);
 }
 
-// `next_sample` where `moving`, else the same place without moving k on.
+// `next_sample`, moving k on only where `moving` (a refined segment's
+// passes leave the leaf's grid where it was).
 fn grid_next(ray: ptr<function, Ray>, t: f32, h: f32, k: ptr<function, u32>, tc: f32,
              t_exit: f32, moving: bool) -> f32 {
     let tk = t + f32(*k) * h;
@@ -426,19 +419,9 @@ fn cells_skip(leaf: Leaf, o: vec3<f32>, d: vec3<f32>, inv_d: vec3<f32>, t: f32, 
     return false;
 }
 
-// What the segment from (tc, s_prev) to (tn, s) adds: its pre-integrated
-// average (the closed form, the 2D table, the table from the segment's
-// ends, or the table's segment integral), the enhancers' say, Phong
-// shading where it is not transparent, composited by the stepper.
-fn composite_segment(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f32>,
-                     d: vec3<f32>, tc: f32, tn: f32, s_prev: f32, s: f32, e_prev: TfEnd,
-                     e: TfEnd, ls: LayerSeg, layer_w: vec3<f32>) -> Sample {
-    return composite_average(acc, lv, blend, o, d, tc, tn, s_prev, s,
-                             preintegrated(s_prev, s, e_prev, e), ls, layer_w);
-}
-
 // The volume's pre-integrated average (τ̄, τ̄·c̄) over the data segment from
-// s_prev to s.
+// s_prev to s: the closed form, the 2D table, the table from the segment's
+// ends, or the table's segment integral.
 fn preintegrated(s_prev: f32, s: f32, e_prev: TfEnd, e: TfEnd) -> vec4<f32> {
     if (ANALYTIC_PREINT) {
         return analytic_average(s_prev, s);
@@ -450,6 +433,10 @@ fn preintegrated(s_prev: f32, s: f32, e_prev: TfEnd, e: TfEnd) -> vec4<f32> {
     return segment_average(0u, frame.counts.w, s_prev, s);
 }
 
+// What the segment from (tc, s_prev) to (tn, s) adds: its pre-integrated
+// average `avg_in` (`preintegrated`, which the march also reads to decide
+// on refinement), the enhancers' say, Phong shading where it is not
+// transparent, composited by the stepper.
 fn composite_average(acc: ptr<function, Acc>, lv: Levels, blend: bool, o: vec3<f32>,
                      d: vec3<f32>, tc: f32, tn: f32, s_prev: f32, s: f32, avg_in: vec4<f32>,
                      ls: LayerSeg, layer_w: vec3<f32>) -> Sample {
