@@ -47,7 +47,7 @@ import --brick 64`: half as many leaves along a ray, so less traversal per
 ray; the finest level is the same data) on the coarser steps
 (BIG_BRICK_STEPS), where that cost weighs most. Both ladders run on
 8-bit and on full-precision bricks. A third ladder draws the full-precision bricks
-of 64 one level of detail coarser (render.accuracy = 6: level 1, 2 mm
+of 64 one level of detail coarser (render.accuracy = 6, opaque_detail = 1: level 1, 2 mm
 voxels, on every case's view; COARSE_STEPS). Then, for each VTK setting,
 the ladder that holds its partner is bisected twice (REFINE) between its
 largest step as accurate as VTK and its next, so that the partner's step
@@ -109,7 +109,8 @@ PREINT_LABELS = {"analytic": "closed form", "2d": "2D table"}
 TABLE_STEPS = [0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0]
 BIG_BRICK_STEPS = [1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 5.5, 6.0, 7.0, 8.0]
 # One level of detail coarser (2 mm voxels, the full-precision bricks of
-# 64): render.accuracy 6 (a voxel may cover up to 6 pixels) draws every
+# 64): render.accuracy 6 (a voxel may cover up to 6 pixels) with
+# render.opaque_detail 1 (opaque voxels held to the same 6) draws every
 # case's level 1 on this view, whose level-0 voxels cover 1.7–2.3 pixels.
 # Its steps in mm; step_factor counts the level's voxels, half as many.
 COARSE_ACCURACY = 6.0
@@ -354,9 +355,11 @@ CASES = [
 VOLUME_FILES = {"ct": "ct256", "ct-thick": "ct-thick"}
 # The defaults-only ladders: accuracy (pixels per voxel) against step_factor.
 # Below 1, accuracy also shrinks the finest level's step (sub-pixel
-# accuracy); above, it coarsens the cut (on this view 300 / 98 / 44 / 20 / 8
-# bricks at 1 / 2 / 4 / 8 / 16).
-DEFAULT_ACCURACIES = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0]
+# accuracy); above, it coarsens the cut. The tissue's voxels can be opaque
+# under CT-Soft-Tissue, so they are held to accuracy / 2
+# (render.opaque_detail): on this view 300 / 300 / 98 / 44 / 20 / 8 bricks
+# at 1 / 2 / 4 / 8 / 16 / 32.
+DEFAULT_ACCURACIES = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0]
 # Their step_factors (the "step_mm" column: rays cross the slices along y,
 # so at the finest level step_factor 1 is 1 mm; a coarser level's voxel
 # is larger by its level's factor).
@@ -580,7 +583,7 @@ def run_case(case, a, px, out, volume):
             ladders[f"{kind} bricks, {label}"] = Ladder(kind, TABLE_STEPS)
             ladders[f"{kind} bricks of 64, {label}"] = Ladder(f"{kind}-b64", BIG_BRICK_STEPS)
         ladders[f"full bricks of 64, {label}, level 1"] = Ladder(
-            "full-b64", COARSE_STEPS, COARSE_VOXEL_MM, dict(accuracy=COARSE_ACCURACY), "-level1")
+            "full-b64", COARSE_STEPS, COARSE_VOXEL_MM, dict(accuracy=COARSE_ACCURACY, opaque_detail=1.0), "-level1")
 
     def table_run(label, s):
         ld = ladders[label]

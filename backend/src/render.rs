@@ -158,6 +158,7 @@ fn caches(
             gpu_slots: slots,
             upload_budget: cfg.upload_budget.max(1),
             accuracy: cfg.accuracy,
+            opaque_detail: cfg.opaque_detail,
             use_feedback: cfg.visibility_feedback,
             frustum_culling: true,
             io_threads: 2,
@@ -1089,6 +1090,15 @@ impl Renderer {
             self.loader.wait_idle();
         }
         self.loader.set_accuracy(cfg.accuracy);
+        // Opaque voxels are held to accuracy / opaque_detail; isosurfaces'
+        // nodes follow the isovalue, not the function's opacity, and
+        // multilevel sampling blends every leaf by `accuracy` alone (it
+        // would blend an opaque leaf back towards its parent).
+        let opacity = match (&self.tf, cfg.mode) {
+            (Some(tf), Mode::Dvr | Mode::Mimda) if !cfg.multilevel => Some(&tf.function),
+            _ => None,
+        };
+        self.loader.set_opacity(cfg.opaque_detail, opacity);
         let t = Instant::now();
         // The tools as this frame sees them, once: resolved against the
         // transfer function and placed by `ctx`.

@@ -62,6 +62,7 @@ fn config(accuracy: f64) -> LoaderConfig {
         gpu_slots: 1000,
         upload_budget: 1000,
         accuracy,
+        opaque_detail: 1.0,
         use_feedback: false,
         frustum_culling: true,
         io_threads: 2,

@@ -275,6 +275,7 @@ fn loader_bricks(
             .min(MAX_INDEX_NODES as u32),
             upload_budget: cfg.upload_budget,
             accuracy: cfg.accuracy,
+            opaque_detail: 1.0,
             use_feedback: false,
             frustum_culling: true,
             io_threads: 2,
@@ -544,6 +545,10 @@ fn out_of_core_volume_converges_within_budget() {
         cpu_cache_mb: 4.0,
         gpu_cache_mb: 2.0,
         visibility_feedback: false,
+        // Every node to the same accuracy (the function's value 255 can
+        // stop a ray within a level-2 voxel), so that 1.5 below is a
+        // uniformly coarser cut.
+        opaque_detail: 1.0,
         ..RenderConfig::default()
     };
     let (cpu_budget, gpu_budget) = (

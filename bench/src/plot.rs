@@ -42,6 +42,7 @@ pub fn work_precision(path: &Path, points: &[Point]) -> Result<()> {
         ("accuracy", "full", BLUE),
         ("early_termination", "full", GREEN),
         ("refinement", "full", RGBColor(200, 160, 0)),
+        ("opaque_detail", "full", RGBColor(120, 60, 160)),
         ("step_factor", "8-bit", MAGENTA),
     ];
     for (knob, bricks, color) in series {

@@ -102,6 +102,10 @@ pub fn seam_study(out: &Path, n: usize, resolution: [u32; 2]) -> Result<Vec<Seam
             // segments' refinement alone takes it from 9.5e-3 to 1.3e-3
             // here (each level's chord error is most of it), so it is off.
             refinement: 1,
+            // Every node to `accuracy`, so that the cut mixes levels where
+            // the footprint says (opaque voxels one level finer would make
+            // this view's cut all level 0: no seam to study).
+            opaque_detail: 1.0,
             ..precise_config()
         };
         let (f, ms) = converged_frame(shot, &cfg)?;

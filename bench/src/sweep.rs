@@ -145,7 +145,7 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
     add(
         "accuracy",
         "full",
-        &[0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0],
+        &[0.25, 0.5, 1.0, 1.4, 2.0, 2.8, 4.0, 5.6, 8.0, 11.0, 16.0],
         |c, a| {
             c.accuracy = a;
             c.step_factor = precise_step(a);
@@ -198,6 +198,13 @@ fn settings(base: &RenderConfig) -> Vec<Setting> {
         c.accuracy = 1.0;
         c.step_factor = 0.5;
         c.refinement = r as u32;
+    });
+    // Opaque voxels held to accuracy / 1 (off), / 2 (the default), / 4
+    // (`RenderConfig::opaque_detail`), at the default accuracy and step.
+    add("opaque_detail", "full", &[1.0, 2.0, 4.0], |c, d| {
+        c.accuracy = 1.0;
+        c.step_factor = 0.5;
+        c.opaque_detail = d;
     });
     add(
         "early_termination",
@@ -357,7 +364,7 @@ mod tests {
     fn every_knob_changes_the_base() {
         let base = precise_config();
         let s = settings(&base);
-        assert_eq!(s.len(), 54);
+        assert_eq!(s.len(), 61);
         // Each setting differs from the base, except the sweep's own base
         // step (0.25) of the plain step knobs.
         let same: Vec<_> = s

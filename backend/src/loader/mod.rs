@@ -41,7 +41,7 @@ pub use geometry::LightField;
 use io::{IoPool, Landed, Source};
 use parallax_common::camera::{Placement, View};
 use parallax_common::protocol::HeldBack;
-use parallax_common::tf::EmptinessTable;
+use parallax_common::tf::{EmptinessTable, TransferFunction};
 use ranges::SubtreeRanges;
 pub use resample::Affine;
 use serde::Serialize;
@@ -64,6 +64,11 @@ pub struct LoaderConfig {
     /// A node is adequate when one of its voxels projects to ≤ `accuracy`
     /// display pixels (G08 §4, L12 §4.2).
     pub accuracy: f64,
+    /// Nodes whose voxel can hold most of a ray's light (optical depth
+    /// above 1) are adequate only at
+    /// `accuracy / opaque_detail` pixels (`render.opaque_detail`; 1: off).
+    /// Which nodes those are comes from [`Loader::set_opacity`].
+    pub opaque_detail: f64,
     /// G10 §5 visibility feedback culling.
     pub use_feedback: bool,
     /// View-frustum culling (on unless a test compares against it).
@@ -79,6 +84,7 @@ impl Default for LoaderConfig {
             gpu_slots: 4096,
             upload_budget: 64,
             accuracy: 1.0,
+            opaque_detail: 1.0,
             use_feedback: true,
             frustum_culling: true,
             io_threads: 2,
@@ -247,9 +253,44 @@ pub struct Loader {
     errors: Vec<String>,
     bytes_read: u64,
     lightfield: Option<LightField>,
+    /// The transfer function that says which nodes' voxels can be opaque
+    /// (`LoaderConfig::opaque_detail`); `None`: none are.
+    opacity: Option<TransferFunction>,
 }
 
 impl Loader {
+    /// The transfer function whose extinction decides which nodes are held
+    /// to `accuracy / detail` pixels, and `detail` (≥ 1; 1 or `None`: every
+    /// node to `accuracy`). An isosurface passes `None`: its nodes are
+    /// chosen by the isovalue.
+    pub fn set_opacity(&mut self, detail: f64, tf: Option<&TransferFunction>) {
+        self.cfg.opaque_detail = detail.max(1.0);
+        if self.opacity.as_ref() != tf {
+            self.opacity = tf.cloned();
+        }
+    }
+
+    /// How many times finer than `accuracy` a node must be seen: the
+    /// opaque detail where one of the node's voxels, along the edge its
+    /// children halve (`Geometry::voxel_len`), has an optical depth above 1
+    /// for some value in its subtree's range (what its descendants show,
+    /// which the node's averages may have smoothed away), else 1.
+    fn detail(&self, key: NodeKey) -> f64 {
+        match (&self.opacity, self.ranges.get(key)) {
+            (Some(tf), Some((lo, hi))) if self.cfg.opaque_detail > 1.0 => {
+                let edge = self.geom.voxel_len(key.level as u32);
+                let tau = tf.max_extinction_in(f64::from(lo), f64::from(hi));
+                // The depth the kernel's opaque-segment refinement starts at.
+                if tau * edge > crate::raycast::REFINE_DEPTH {
+                    self.cfg.opaque_detail
+                } else {
+                    1.0
+                }
+            }
+            _ => 1.0,
+        }
+    }
+
     /// The light field display the η > 0 views are shown on: their level
     /// of detail then follows the display's depth-dependent resolution
     /// s(z) = s0 + 2|z|·tan(Φ/2) (G10 §4) instead of the pixel grid.
@@ -337,6 +378,7 @@ impl Loader {
             errors: Vec::new(),
             bytes_read: 0,
             lightfield: None,
+            opacity: None,
         }
     }
 
@@ -421,7 +463,7 @@ impl Loader {
                 true
             };
             if ready {
-                heap.push(candidate(&frame, root));
+                heap.push(candidate(&frame, root, self.detail(root)));
             } else {
                 b.stats.adequate = false;
             }
@@ -742,7 +784,7 @@ impl Loader {
             if cl.culled_empty {
                 b.stats.culled_empty += 1;
             } else {
-                heap.push(candidate(frame, ch));
+                heap.push(candidate(frame, ch, self.detail(ch)));
             }
         }
         b.cut.get_mut(&key).unwrap().refined = true;
@@ -818,10 +860,13 @@ fn cut_node(c: &NodeClass, slot: Option<u32>) -> CutNode {
     }
 }
 
-fn candidate(frame: &FrameGeometry, key: NodeKey) -> Candidate {
+/// A node to refine, its projected voxel times `detail` (so an opaque node
+/// is compared with `accuracy / detail`, and refined before translucent
+/// nodes of the same size).
+fn candidate(frame: &FrameGeometry, key: NodeKey, detail: f64) -> Candidate {
     let a = frame.assess(key);
     Candidate {
-        pixels: a.pixels,
+        pixels: a.pixels * detail,
         seen: a.seen,
         key,
     }
@@ -861,6 +906,7 @@ mod tests {
                 gpu_slots: 10,
                 upload_budget: 100,
                 accuracy: 1e-6,
+                opaque_detail: 1.0,
                 use_feedback: false,
                 frustum_culling: true,
                 io_threads: 1,

@@ -137,8 +137,9 @@ fn can_be_opaque(
 }
 
 /// The optical depth above which a segment is refined (the kernel's
-/// REFINE_DEPTH).
-const REFINE_DEPTH: f64 = 1.0;
+/// REFINE_DEPTH); also where the loader holds a voxel to be opaque
+/// (`LoaderConfig::opaque_detail`).
+pub(crate) const REFINE_DEPTH: f64 = 1.0;
 
 impl Raycaster {
     /// A ray caster for pools of `float` (r32float) or 8-bit bricks. Asked

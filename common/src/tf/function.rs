@@ -302,6 +302,22 @@ impl TransferFunction {
         self.points.iter().map(|p| p.extinction).fold(0.0, f64::max)
     }
 
+    /// The largest extinction over the values [lo, hi] (0 for an empty or
+    /// NaN range): the larger end, or a control point inside. Between
+    /// points τ is linear, so its maximum is at one of these.
+    pub fn max_extinction_in(&self, lo: f64, hi: f64) -> f64 {
+        if lo.is_nan() || hi.is_nan() || lo > hi {
+            return 0.0;
+        }
+        let pts = &self.points;
+        let first = pts.partition_point(|p| p.value < lo);
+        let inside = pts[first..]
+            .iter()
+            .take_while(|p| p.value <= hi)
+            .map(|p| p.extinction);
+        inside.fold(self.tau(lo).max(self.tau(hi)), f64::max)
+    }
+
     /// The optical properties at data value `s`. Between control points every
     /// property is linear in `s`; beyond the first and the last point it is
     /// constant; at a step the later point applies for `s >= value`. A NaN `s`

@@ -1120,3 +1120,42 @@ fn closed_form_leaves_out_empty_pieces_and_declines_what_it_cannot_hold() {
     assert!(cf.pieces.is_empty());
     assert_eq!(cf.average(0.2, 0.7), [0.0; 4]);
 }
+
+/// The largest extinction over a range equals the largest of the function
+/// sampled densely over it (a step included), and is 0 for a reversed or
+/// NaN range.
+#[test]
+fn max_extinction_in_a_range_is_the_sampled_maximum() {
+    let tf = TransferFunction::from_points(vec![
+        ControlPoint::new(-1000.0, [0.0; 3], 0.0),
+        ControlPoint::new(-100.0, [1.0; 3], 0.0),
+        ControlPoint::new(0.0, [1.0; 3], 2.0),
+        ControlPoint::new(300.0, [1.0; 3], 0.5),
+        ControlPoint::new(300.0, [1.0; 3], 6.0),
+        ControlPoint::new(900.0, [1.0; 3], 1.0),
+    ])
+    .unwrap();
+    let ranges = [
+        (-2000.0, -1500.0),
+        (-1000.0, -100.0),
+        (-200.0, -50.0),
+        (-50.0, 50.0),
+        (10.0, 290.0),
+        (10.0, 300.0),
+        (310.0, 2000.0),
+        (1000.0, 1200.0),
+        (-3000.0, 3000.0),
+    ];
+    for (lo, hi) in ranges {
+        let sampled = (0..=20_000)
+            .map(|i| tf.tau(lo + (hi - lo) * f64::from(i) / 20_000.0))
+            .fold(0.0, f64::max);
+        let got = tf.max_extinction_in(lo, hi);
+        assert!(
+            (got - sampled).abs() <= 1e-3 * sampled.max(1.0),
+            "[{lo}, {hi}]: {got} against sampled {sampled}"
+        );
+    }
+    assert_eq!(tf.max_extinction_in(5.0, 1.0), 0.0);
+    assert_eq!(tf.max_extinction_in(f64::NAN, 1.0), 0.0);
+}
