@@ -97,12 +97,14 @@ pub struct RenderInputs<'a> {
 /// Whether a segment of this frame can have an optical depth above 1, the
 /// opaque-segment refinement's threshold (`refinement`): the transfer
 /// function's largest extinction over the longest step of the cut's
-/// coarsest leaf with data (`step_factor` × its voxel's longest edge; any
-/// step with the adaptive one). Where it cannot, the kernel leaves the
-/// refinement out and costs what it did without it.
+/// coarsest leaf with data (`step_factor` × its voxel along the frame's
+/// rays, bounded by [`longest_voxel_along`]; any step with the adaptive
+/// one). Where it cannot, the kernel leaves the refinement out and costs
+/// what it did without it.
 fn can_be_opaque(
     index: &SpatialIndex,
     scene: &SceneGeometry,
+    views: &[View],
     max_extinction: f32,
     settings: &RenderSettings,
 ) -> bool {
@@ -115,25 +117,107 @@ fn can_be_opaque(
     let Some(coarsest) = index
         .nodes
         .iter()
-        .filter(|n| n.slot().is_some())
+        .filter(|n| n.slot().is_some() && n.first_child().is_none())
         .map(|n| n.level())
         .min()
     else {
         return false;
     };
     let l = &scene.geom.layout;
-    let edge = (0..3)
-        .map(|a| {
-            let upto = if coarsest >= 31 {
-                u32::MAX
-            } else {
-                (2u32 << coarsest) - 1
-            };
-            let above = l.splits[a].count_ones() - (l.splits[a] & upto).count_ones();
-            scene.geom.spacing[a] * f64::from(1u32 << above.min(31))
-        })
+    let edges: [f64; 3] = std::array::from_fn(|a| {
+        let upto = if coarsest >= 31 {
+            u32::MAX
+        } else {
+            (2u32 << coarsest) - 1
+        };
+        let above = l.splits[a].count_ones() - (l.splits[a] & upto).count_ones();
+        scene.geom.spacing[a] * f64::from(1u32 << above.min(31))
+    });
+    let voxel = longest_voxel_along(views, &scene.placement, edges);
+    f64::from(max_extinction) * f64::from(settings.step_factor) * voxel > REFINE_DEPTH
+}
+
+/// An upper bound on a voxel of `edges` measured along any ray of `views`
+/// (the kernel's `voxel_along`, 1 / |d ⊘ e|): the longest edge, unless the
+/// rays keep away from its axis. Each view's rays start on the segment of
+/// G10 Eq. 1's origins (a point for η = 0) and end in its screen region, so
+/// their directions lie in the convex cone of the eight directions from
+/// that segment's ends to the region's corners, and in the circular cone
+/// around their mean that holds all eight (if narrower than a half space).
+/// A direction at least θ from the longest edge's axis has d_l² ≤ cos²θ,
+/// so |d ⊘ e|² ≥ sin²θ / m² + cos²θ / l² (l the longest edge, m the next):
+/// on thick slices seen across, the step is the in-plane voxel's, not the
+/// slice's.
+fn longest_voxel_along(
+    views: &[View],
+    placement: &parallax_common::camera::Placement,
+    edges: [f64; 3],
+) -> f64 {
+    use glam::DVec3;
+    let longest = edges.iter().cloned().fold(0.0, f64::max);
+    let axis = (0..3).fold(0, |b, a| if edges[a] > edges[b] { a } else { b });
+    let next = (0..3)
+        .filter(|&a| a != axis)
+        .map(|a| edges[a])
         .fold(0.0, f64::max);
-    f64::from(max_extinction) * f64::from(settings.step_factor) * edge > REFINE_DEPTH
+    if !(next > 0.0 && next < longest) {
+        return longest;
+    }
+    let rt = placement.rotation().transpose();
+    let mut bound: f64 = 0.0;
+    for v in views {
+        let [x0, y0, w, h] = v.region;
+        let corners = [
+            DVec3::new(x0, y0, 0.0),
+            DVec3::new(x0 + w, y0, 0.0),
+            DVec3::new(x0, y0 + h, 0.0),
+            DVec3::new(x0 + w, y0 + h, 0.0),
+        ];
+        let (e, o) = (DVec3::from(v.eye), DVec3::from(v.observer));
+        // The origins' segment: O.x from the region's left and right edge
+        // (View::ray; the same point where η = 0 or the eye is on the screen).
+        let origin = |x: f64| {
+            let dz = -e.z;
+            let mcop = if dz.abs() > 1e-12 {
+                e.x + (x - e.x) / dz * (o.z - e.z)
+            } else {
+                o.x
+            };
+            DVec3::new((1.0 - v.eta) * o.x + v.eta * mcop, o.y, o.z)
+        };
+        let mut dirs = Vec::with_capacity(8);
+        for start in [origin(x0), origin(x0 + w)] {
+            for c in corners {
+                let d = rt * (c - start);
+                if !d.is_finite() || d.length() <= 0.0 {
+                    return longest;
+                }
+                dirs.push(d.normalize());
+            }
+        }
+        let mean = dirs.iter().fold(DVec3::ZERO, |m, d| m + *d);
+        if !mean.is_finite() || mean.length() <= 1e-9 {
+            return longest;
+        }
+        let mean = mean.normalize();
+        let half = dirs
+            .iter()
+            .map(|d| d.dot(mean).clamp(-1.0, 1.0).acos())
+            .fold(0.0, f64::max);
+        if half >= std::f64::consts::FRAC_PI_2 {
+            return longest;
+        }
+        let to_axis = mean[axis].abs().clamp(0.0, 1.0).acos();
+        let theta = (to_axis - half).max(0.0);
+        let (s, c) = theta.sin_cos();
+        let q = s * s / (next * next) + c * c / (longest * longest);
+        bound = bound.max((1.0 / q.sqrt()).min(longest));
+    }
+    if views.is_empty() {
+        longest
+    } else {
+        bound
+    }
 }
 
 /// The optical depth above which a segment is refined (the kernel's
@@ -446,7 +530,13 @@ impl Raycaster {
         let refine = settings.refine_parts() > 1
             && !k.iso
             && !layered
-            && can_be_opaque(inputs.index, inputs.scene, tf.max_extinction, settings);
+            && can_be_opaque(
+                inputs.index,
+                inputs.scene,
+                inputs.views,
+                tf.max_extinction,
+                settings,
+            );
         self.pipeline(
             gpu,
             &settings.kernel,
@@ -618,5 +708,90 @@ impl Rendered {
             tiles: 0,
             tiles_seconds: 0.0,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::longest_voxel_along;
+    use glam::DVec3;
+    use parallax_common::camera::{Placement, View};
+
+    /// The largest 1 / |d ⊘ e| over a view's rays, pixel by pixel (the
+    /// kernel's `voxel_along` on the directions `View::ray` gives).
+    fn sampled(view: &View, placement: &Placement, e: [f64; 3]) -> f64 {
+        let rt = placement.rotation().transpose();
+        let e = DVec3::from(e);
+        let mut most: f64 = 0.0;
+        for j in 0..view.resolution[1] {
+            for i in 0..view.resolution[0] {
+                let d = (rt * view.ray(i, j).1).normalize();
+                most = most.max(1.0 / (d / e).length());
+            }
+        }
+        most
+    }
+
+    /// The bound holds over every ray of windows and light field views at
+    /// several turns of a thick-slice volume, and is tight enough to tell
+    /// rays across the slices (about the in-plane voxel) from rays along
+    /// them (the slice).
+    #[test]
+    fn the_voxel_along_the_rays_is_bounded() {
+        let e = [1.0, 1.0, 10.7];
+        let views = [
+            View::window([40, 30], [0.4, 0.3], [0.0, 0.0, 1.2]),
+            View::window([40, 30], [0.4, 0.3], [0.15, -0.1, 0.6]),
+            View {
+                eta: 1.0,
+                eye: [0.3, 0.0, -1.5],
+                ..View::window([40, 30], [0.4, 0.3], [0.0, 0.05, 1.0])
+            },
+        ];
+        let mut across = 0.0f64;
+        for rot in [
+            [0.0, 0.0, 0.0],
+            [90.0, 0.0, 0.0],
+            [-70.0, 30.0, 0.0],
+            [80.0, 10.0, 45.0],
+            [0.0, 90.0, 0.0],
+        ] {
+            let placement = Placement {
+                center: [0.0; 3],
+                rotation_deg: rot,
+                size: 0.25,
+            };
+            for v in &views {
+                let bound = longest_voxel_along(std::slice::from_ref(v), &placement, e);
+                let seen = sampled(v, &placement, e);
+                assert!(
+                    seen <= bound * (1.0 + 1e-9) && bound <= 10.7,
+                    "{rot:?} {v:?}: rays see {seen}, bound {bound}"
+                );
+                if rot == [90.0, 0.0, 0.0] && v.eta == 0.0 {
+                    across = across.max(bound);
+                }
+            }
+        }
+        // Turned 90° about x the slices' normal lies in the screen plane:
+        // the rays cross the slices.
+        assert!(across < 1.5, "across the slices: {across}");
+        let along = longest_voxel_along(
+            &views[..1],
+            &Placement {
+                center: [0.0; 3],
+                rotation_deg: [0.0; 3],
+                size: 0.25,
+            },
+            e,
+        );
+        assert_eq!(along, 10.7, "along the slices");
+        // Cubic voxels are their edge.
+        let placement = Placement {
+            center: [0.0; 3],
+            rotation_deg: [10.0, 20.0, 30.0],
+            size: 0.25,
+        };
+        assert_eq!(longest_voxel_along(&views, &placement, [2.0; 3]), 2.0);
     }
 }
