@@ -123,16 +123,8 @@ fn can_be_opaque(
     else {
         return false;
     };
-    let l = &scene.geom.layout;
-    let edges: [f64; 3] = std::array::from_fn(|a| {
-        let upto = if coarsest >= 31 {
-            u32::MAX
-        } else {
-            (2u32 << coarsest) - 1
-        };
-        let above = l.splits[a].count_ones() - (l.splits[a] & upto).count_ones();
-        scene.geom.spacing[a] * f64::from(1u32 << above.min(31))
-    });
+    let scale = scene.geom.layout.voxel_scale(coarsest);
+    let edges: [f64; 3] = std::array::from_fn(|a| scale[a] as f64 * scene.geom.spacing[a]);
     let voxel = longest_voxel_along(views, &scene.placement, edges);
     f64::from(max_extinction) * f64::from(settings.step_factor) * voxel > REFINE_DEPTH
 }
