@@ -60,7 +60,9 @@ override LOOKAHEAD: bool = false;
 // `can_be_opaque`); not for isosurfaces, refraction (a bend per sample) or
 // registered layers.
 override REFINE: bool = false;
-const REFINE_DEPTH: f32 = 1.0;
+// Set by the CPU from the one definition (backend/src/raycast/mod.rs
+// `REFINE_DEPTH`), which the loader's opaque detail shares.
+override REFINE_DEPTH: f32;
 fn refines() -> bool {
     return REFINE && !ISO && LAYERS == 0u && !REFRACTION;
 }

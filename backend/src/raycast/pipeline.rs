@@ -54,6 +54,9 @@ impl Raycaster {
                 // Opaque-segment refinement compiled in (`Raycaster::kernel`
                 // says where a segment can be optically thick).
                 ("REFINE", flag(refine)),
+                // The optical depth above which a segment is refined: one
+                // definition for the kernel, `can_be_opaque` and the loader.
+                ("REFINE_DEPTH", super::REFINE_DEPTH),
                 // A tap at or above this is a no-data voxel: the top code of
                 // an 8-bit pool, NO_DATA_VALUE in a float pool.
                 (

@@ -97,6 +97,7 @@ pub const OVERRIDES: &[&str] = &[
     "LOOKAHEAD",
     "TOOL_TILES",
     "REFINE",
+    "REFINE_DEPTH",
 ];
 
 /// One specialised kernel: the stepper and the enhancer chain.
@@ -537,13 +538,15 @@ mod tests {
         // three pre-integration paths, of which a pipeline sets at most
         // one, count as one override of four values (two bits), and
         // TF_PIECES, a count, takes its largest value (the whole
-        // uniform array).
+        // uniform array), REFINE_DEPTH its one value.
         const PATHS: [&str; 3] = ["END_PREINT", "GRID_PREINT", "ANALYTIC_PREINT"];
+        // Overrides that are values, not flags: each gets the pipeline's.
+        const VALUES: [&str; 2] = ["TF_PIECES", "REFINE_DEPTH"];
         if (key.enhancers.len() == MAX_ENHANCERS || key.enhancers.is_empty()) && key.layers == 0 {
             let flags: Vec<&str> = OVERRIDES
                 .iter()
                 .copied()
-                .filter(|n| *n != "TF_PIECES" && !PATHS.contains(n))
+                .filter(|n| !VALUES.contains(n) && !PATHS.contains(n))
                 .collect();
             // The path's two bits come first, then the flags. The last
             // two flags follow from the others: the last is their parity,
@@ -565,6 +568,7 @@ mod tests {
                     "TF_PIECES".to_string(),
                     parallax_common::tf::closed::MAX_PIECES as f64,
                 );
+                constants.insert("REFINE_DEPTH".to_string(), crate::raycast::REFINE_DEPTH);
                 let (m, _) = naga::back::pipeline_constants::process_overrides(
                     &module,
                     &info,
