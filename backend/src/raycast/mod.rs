@@ -213,8 +213,8 @@ fn longest_voxel_along(
 }
 
 /// The optical depth above which a segment is refined (the kernel's
-/// REFINE_DEPTH, a pipeline constant set from this); also where the loader holds a voxel to be opaque
-/// (`LoaderConfig::opaque_detail`).
+/// REFINE_DEPTH, a pipeline constant set from this); also where the loader
+/// holds a voxel to be opaque (`LoaderConfig::opaque_detail`).
 pub(crate) const REFINE_DEPTH: f64 = 1.0;
 
 impl Raycaster {
