@@ -149,7 +149,8 @@ fn analytic_average(sa: f32, sb: f32) -> vec4<f32> {
         let ub = clamp(hi - p.span.x, 0.0, p.span.y);
         sum = sum + (ub - ua) * (p.q0 + p.q1 * (ua + ub) + p.q2 * (ua * ua + ua * ub + ub * ub));
     }
-    return max(sum / (hi - lo), vec4<f32>(0.0));
+    // One division, not four: a SIMD division is slow on a CPU device.
+    return max(sum * (1.0 / (hi - lo)), vec4<f32>(0.0));
 }
 
 
