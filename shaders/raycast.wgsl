@@ -648,14 +648,13 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
             k = 0u;
             skip_first = true;
         }
-        // The sample that only starts the march (the leaf's entry, or the
-        // last one before its non-empty cells, or its exit), taken before
-        // the loop: a CPU device runs the loop's whole body, the segment's
-        // table lookup and compositing included, for every pass of any of
-        // its lanes; as a pass of the loop this sample cost a full pass,
-        // here it costs a sample. With LOOKAHEAD it is fetched in the loop
-        // below that also fetches the march's first value ahead.
-        if (skip_first && !LOOKAHEAD) {
+        if (skip_first) {
+            // The sample that only starts the march (the leaf's entry, or
+            // the last one before its non-empty cells, or its exit), taken
+            // before the loop: a CPU device runs the loop's whole body,
+            // the segment's table lookup and compositing included, for
+            // every pass of any of its lanes; as a pass of the loop this
+            // sample cost a full pass, here it costs a sample.
             let tn = next_sample(&ray, t, h, &k, tc, t_exit);
             if (LAYERS > 0u) {
                 let v = sample_layered(leaf, o + d * tn);
@@ -680,38 +679,11 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wg:
         // leaf's march fetches one value more than it uses. Nothing a pass
         // does moves a later sample: tools add their breaks at the ray's
         // start, and a bent ray leaves the loop.
-        // The starting sample (where one is needed) and the first value
-        // fetched ahead come from one fetch in a loop of one or two
-        // passes: a CPU device runs both of two separate fetches on every
-        // leaf of every SIMD row, the second only where a lane of the row
-        // starts its march here (Colin27 brain 5.62 mm: 0.95 of the time,
-        // docs/performance.md "Kernel changes on a CPU device").
         var tn_next = tc;
         var s_next = s_prev;
-        if (LOOKAHEAD) {
-            var start = skip_first;
-            loop {
-                if (tc >= t_exit) {
-                    break;
-                }
-                let tq = next_sample(&ray, t, h, &k, tc, t_exit);
-                let v = sample_levels(lv, blend, o + d * tq);
-                if (!start) {
-                    tn_next = tq;
-                    s_next = v;
-                    break;
-                }
-                start = false;
-                s_prev = v;
-                n_samples = n_samples + 1u;
-                if (!ISO) {
-                    e_prev = tf_end(s_prev);
-                }
-                have_prev = true;
-                tc = tq;
-                tn_next = tc;
-                s_next = s_prev;
-            }
+        if (LOOKAHEAD && tc < t_exit) {
+            tn_next = next_sample(&ray, t, h, &k, tc, t_exit);
+            s_next = sample_levels(lv, blend, o + d * tn_next);
         }
         var fine = false;
         var t_fine = 0.0;
