@@ -540,10 +540,10 @@ impl Renderer {
         Ok(())
     }
 
-    /// A series' loaders: the drawn step's (`current`, or a new one on
-    /// `self.db`) and the next step's, reading ahead, each with half of
-    /// `render.cpu_cache_mb`: playing, the CPU cache holds the drawn step's
-    /// bricks and the next one's.
+    /// A series' loaders: the drawn step's (`current`, or the one the
+    /// renderer has, on `self.db`) and the next step's, reading ahead,
+    /// each with half of `render.cpu_cache_mb`: playing, the CPU cache
+    /// holds the drawn step's bricks and the next one's.
     fn series_loaders(&mut self, current: Option<Loader>) -> Result<()> {
         let mut cfg = self.loader.config().clone();
         let total = (self.budgets.cpu_cache_mb * (1 << 20) as f64) as u64;
@@ -559,12 +559,11 @@ impl Renderer {
                 (2.0 * (min_bricks * brick_bytes) as f64 / (1 << 20) as f64 * 100.0).ceil() / 100.0
             );
         }
-        let mut loader = match current {
-            Some(l) => l,
-            None => self.step_loader(self.db.clone(), &cfg),
-        };
-        loader.load_root();
-        self.loader = loader;
+        match current {
+            Some(l) => self.loader = l,
+            None => self.loader.set_cpu_budget(cfg.cpu_budget_bytes),
+        }
+        self.loader.load_root();
         let n = (self.step + 1) % self.series.len();
         let db = open_step(&self.series[n], n, &self.db)?;
         self.next = Some((n, self.step_loader(db, &cfg)));

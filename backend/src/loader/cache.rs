@@ -77,17 +77,30 @@ impl ByteLru {
         if size > self.budget {
             return false;
         }
-        while self.bytes + size > self.budget {
-            let (&stamp, &victim) = self.order.iter().next().expect("bytes > 0 means entries");
-            self.order.remove(&stamp);
-            let (d, _) = self.map.remove(&victim).unwrap();
-            self.bytes -= brick_bytes(&d);
-        }
+        self.evict_for(size);
         self.clock += 1;
         self.order.insert(self.clock, key);
         self.map.insert(key, (data, self.clock));
         self.bytes += size;
         true
+    }
+
+    /// A new byte budget, evicting the least recently used bricks until
+    /// it holds.
+    pub fn set_budget(&mut self, budget: u64) {
+        self.budget = budget;
+        self.evict_for(0);
+    }
+
+    /// Evicts the least recently used bricks until `room` more bytes fit
+    /// the budget (`room` at most the budget).
+    fn evict_for(&mut self, room: u64) {
+        while self.bytes + room > self.budget {
+            let (&stamp, &victim) = self.order.iter().next().expect("bytes > 0 means entries");
+            self.order.remove(&stamp);
+            let (d, _) = self.map.remove(&victim).unwrap();
+            self.bytes -= brick_bytes(&d);
+        }
     }
 
     pub fn remove(&mut self, key: NodeKey) {
@@ -218,6 +231,14 @@ mod tests {
         c.insert(k(4), brick(50, 1.0));
         assert_eq!(c.bytes(), 600);
         assert_eq!(c.peek(k(4)).unwrap().values[0], 1.0);
+        // a smaller budget evicts the least recent until it holds
+        c.insert(k(6), brick(100, 0.0));
+        c.touch(k(3));
+        c.set_budget(500);
+        assert!(c.contains(k(3)) && !c.contains(k(4)) && !c.contains(k(6)));
+        assert_eq!(c.bytes(), 400);
+        assert!(c.insert(k(7), brick(25, 0.0)) && c.contains(k(3)));
+        assert!(c.bytes() <= 500);
     }
 
     #[test]

@@ -258,6 +258,17 @@ pub struct Loader {
     opacity: Option<TransferFunction>,
 }
 
+/// A CPU budget's shares: each placed layer keeps the decoded bricks it
+/// read last (`recent` bytes each), and the CPU cache has the rest, in
+/// bytes and in bricks of `stored_len` voxels of `channels` f32s.
+fn cpu_shares(budget: u64, placed: u64, stored_len: usize, channels: u64) -> (u64, u64, usize) {
+    let recent = (budget / resample::RECENT_SHARE).min(resample::RECENT_MOST);
+    let l2_budget = budget - placed * recent;
+    let brick_bytes = (stored_len * std::mem::size_of::<f32>()) as u64 * channels;
+    let l2_bricks = (l2_budget / brick_bytes.max(1)).min(usize::MAX as u64) as usize;
+    (recent, l2_budget, l2_bricks)
+}
+
 impl Loader {
     /// The transfer function whose extinction decides which nodes are held
     /// to `accuracy / detail` pixels, and `detail` (≥ 1; 1 or `None`: every
@@ -330,13 +341,9 @@ impl Loader {
             .map(|l| l.transform.is_none().then(|| SubtreeRanges::new(&l.db)))
             .collect();
         let channels = 1 + layers.len() as u64;
-        let brick_bytes = (layout.stored_len() * std::mem::size_of::<f32>()) as u64 * channels;
-        // Each placed layer keeps the decoded bricks it read last, out of
-        // the one CPU budget.
-        let recent = (cfg.cpu_budget_bytes / resample::RECENT_SHARE).min(resample::RECENT_MOST);
         let placed = layers.iter().filter(|l| l.transform.is_some()).count() as u64;
-        let l2_budget = cfg.cpu_budget_bytes - placed * recent;
-        let l2_bricks = (l2_budget / brick_bytes.max(1)).min(usize::MAX as u64) as usize;
+        let (recent, l2_budget, l2_bricks) =
+            cpu_shares(cfg.cpu_budget_bytes, placed, layout.stored_len(), channels);
         let slots = cfg.gpu_slots.min(NO_SLOT);
         let sources = Arc::new(
             std::iter::once(Source {
@@ -380,6 +387,22 @@ impl Loader {
             lightfield: None,
             opacity: None,
         }
+    }
+
+    /// A new CPU cache budget (`LoaderConfig::cpu_budget_bytes`), shared
+    /// as at the start; the least recently used bricks go until it holds.
+    /// A series' drawn step takes half the budget it was started with.
+    pub fn set_cpu_budget(&mut self, bytes: u64) {
+        let placed = self.sources.iter().filter(|s| s.placed.is_some()).count() as u64;
+        let channels = self.sources.len() as u64;
+        let (recent, l2_budget, l2_bricks) =
+            cpu_shares(bytes, placed, self.db.layout().stored_len(), channels);
+        for p in self.sources.iter().filter_map(|s| s.placed.as_ref()) {
+            p.set_recent_budget(recent);
+        }
+        self.l2.set_budget(l2_budget);
+        self.l2_bricks = l2_bricks;
+        self.cfg.cpu_budget_bytes = bytes;
     }
 
     /// Turns view-frustum culling on or off (tests compare against it).

@@ -193,6 +193,11 @@ impl Placed {
         })
     }
 
+    /// A new budget for the layer's own cache of decoded bricks.
+    pub fn set_recent_budget(&self, bytes: u64) {
+        self.recent.lock().unwrap().set_budget(bytes);
+    }
+
     /// The volume's level-`l` voxel size (data units).
     fn vol_voxel(&self, l: u32) -> [f64; 3] {
         let s = self.vol.voxel_scale(l);
