@@ -281,8 +281,7 @@ def shortlist(rows, a, px, out, base, ref):
     (first_ms keeps its first, runs counts them)."""
     picked = []
     for vt, _ in partners(rows):
-        ok = sorted((o for o in rows if o["renderer"] == "parallax" and o["early_termination"] < 1
-                     and o["rmse"] <= vt["rmse"] and o.get("run")), key=lambda r: r["time_ms"])
+        ok = [o for o in as_accurate(rows, vt) if o.get("run")]
         for o in ok[:SHORTLIST]:
             if o["time_ms"] <= SHORTLIST_MARGIN * ok[0]["time_ms"] and all(o is not q for q in picked):
                 picked.append(o)
@@ -518,17 +517,22 @@ def main():
         log(f"\nwrote {a.pairs_csv}")
 
 
+def as_accurate(rows, vt):
+    """The Parallax rows with early termination matched and an RMSE no
+    larger than VTK row `vt`'s, fastest first."""
+    return sorted((o for o in rows if o["renderer"] == "parallax" and o["early_termination"] < 1
+                   and o["rmse"] <= vt["rmse"]), key=lambda r: r["time_ms"])
+
+
 def partners(rows):
     """Each VTK setting (box domain, ray-cast image) with the fastest
-    Parallax setting that has early termination matched and an RMSE no
-    larger (None when there is none)."""
+    Parallax setting as accurate (`as_accurate`; None when there is none)."""
     out = []
     for vt in rows:
         if not (vt["renderer"] == "vtk" and vt["config"].startswith("box") and vt["readback"].startswith("ray")):
             continue
-        ok = [o for o in rows if o["renderer"] == "parallax" and o["early_termination"] < 1
-              and o["rmse"] <= vt["rmse"]]
-        out.append((vt, min(ok, key=lambda r: r["time_ms"]) if ok else None))
+        ok = as_accurate(rows, vt)
+        out.append((vt, ok[0] if ok else None))
     return out
 
 
